@@ -1,0 +1,40 @@
+"""One frame of marker-detector output: what the tracker consumes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wristtrack.errors import InputError
+
+
+@dataclass(frozen=True)
+class Detections:
+    """Unordered blob centres of one frame.
+
+    ``uv`` is (M, 2) pixels; ``depth`` is (M,) metres along the camera z axis with NaN where the
+    sensor gave no reading, or None when the recording has no depth at all.
+    """
+
+    timestamp: float
+    uv: np.ndarray
+    depth: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
+        object.__setattr__(self, "uv", uv)
+        if self.depth is not None:
+            depth = np.asarray(self.depth, dtype=float).reshape(-1)
+            if depth.shape[0] != uv.shape[0]:
+                raise InputError(
+                    f"detections at t={self.timestamp}: {uv.shape[0]} blobs but {depth.shape[0]} "
+                    "depths; give one depth per blob (NaN where unknown)"
+                )
+            object.__setattr__(self, "depth", depth)
+        if not np.isfinite(self.timestamp):
+            raise InputError(f"detections timestamp {self.timestamp} is not a finite number")
+
+    @property
+    def count(self) -> int:
+        return int(self.uv.shape[0])
