@@ -1,0 +1,372 @@
+"""Rotations and rigid motions: SO(3)/SE(3) exp/log, quaternions, Euler and wrist angles.
+
+Pure NumPy, float64, vectorised over any leading axes ("..."). Conventions (DESIGN.md section 2):
+quaternions are (w, x, y, z) with w >= 0; an SE(3) tangent vector is xi = (rho, phi), translation
+part first; Euler sequences are intrinsic and uppercase, with scipy's ``Rotation.from_euler``
+meaning; ``wrist_angles`` is the ISB intrinsic Y-Z-X decomposition in hand axes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ISB_WRIST_SEQUENCE = "YZX"
+PAPER_EULER_SEQUENCE = "ZYZ"
+
+# Below this angle (rad) the trigonometric coefficients use their Taylor series: the closed forms
+# divide by powers of theta and lose precision. Series kept to theta^6, so the truncation error
+# at the threshold is < 1e-20.
+_SMALL_ANGLE = 1e-2
+# Middle Euler angle this close (rad) to its singular value counts as exact gimbal lock. Much
+# tighter than scipy's 1e-7: away from exact lock the quaternion-based decomposition still
+# reproduces the matrix to machine precision, so there is no reason to throw information away.
+_GIMBAL_EPS = 1e-12
+
+_AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _f64(a: np.ndarray | float) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64)
+
+
+def _matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(...,n,n) @ (...,n) -> (...,n) with broadcasting over leading axes."""
+    return (M @ v[..., None])[..., 0]
+
+
+# --------------------------------------------------------------------------------------- SO(3)
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """Cross-product matrices (...,3,3) of (...,3) vectors: skew(w) @ v == cross(w, v)."""
+    w = _f64(w)
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    o = np.zeros_like(x)
+    return np.stack(
+        [np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2
+    )
+
+
+def vee(W: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`skew` (uses the antisymmetric part of W). (...,3,3) -> (...,3)."""
+    W = _f64(W)
+    return 0.5 * np.stack(
+        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+        -1,
+    )
+
+
+def _coefficients(theta2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A = sin t/t, B = (1-cos t)/t^2, C = (t-sin t)/t^3, D = 1/t^2 - cot(t/2)/(2t).
+
+    Closed forms for t >= _SMALL_ANGLE, Taylor series below (all four are smooth in t^2).
+    """
+    t2 = theta2
+    t = np.sqrt(t2)
+    small = t < _SMALL_ANGLE
+    ts = np.where(small, 1.0, t)  # safe divisor; the small branch is discarded by np.where
+    t4, t6 = t2 * t2, t2 * t2 * t2
+    A = np.where(small, 1 - t2 / 6 + t4 / 120 - t6 / 5040, np.sin(ts) / ts)
+    # 2 sin^2(t/2) instead of 1 - cos t: no cancellation for moderate t.
+    B = np.where(small, 0.5 - t2 / 24 + t4 / 720 - t6 / 40320, 2 * np.sin(ts / 2) ** 2 / ts**2)
+    C = np.where(small, 1 / 6 - t2 / 120 + t4 / 5040 - t6 / 362880, (ts - np.sin(ts)) / ts**3)
+    # cot(t/2) = cos/sin is 0 at t = pi, so D stays finite up to (and at) pi.
+    D = np.where(
+        small,
+        1 / 12 + t2 / 720 + t4 / 30240 + t6 / 1209600,
+        1 / ts**2 - np.cos(ts / 2) / (2 * ts * np.sin(ts / 2)),
+    )
+    return A, B, C, D
+
+
+def so3_exp(phi: np.ndarray) -> np.ndarray:
+    """Rotation matrix exp([phi]x) of rotation vectors (...,3) (Rodrigues). Returns (...,3,3)."""
+    phi = _f64(phi)
+    A, B, _, _ = _coefficients(np.sum(phi * phi, axis=-1))
+    K = skew(phi)
+    return np.eye(3) + A[..., None, None] * K + B[..., None, None] * (K @ K)
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector (...,3) of rotation matrices (...,3,3); angle in [0, pi].
+
+    Goes through the quaternion (Shepperd's method picks the largest of w, x, y, z, i.e. the
+    largest diagonal of the symmetric part near pi), so it is accurate near 0 and near pi, and
+    the axis sign near pi comes from the antisymmetric part (w >= 0), not from noise.
+    """
+    q = quat_from_matrix(R)
+    w, v = q[..., 0], q[..., 1:]
+    s = np.linalg.norm(v, axis=-1)
+    small = s < 1e-4
+    # angle / s = 2 atan2(s, w) / s. For small s (then w ~ 1) use atan(x)/x ~ 1 - x^2/3 + x^4/5
+    # with x = s / w, to avoid 0 / 0 at the identity.
+    x2 = (s / np.where(small, w, 1.0)) ** 2
+    series = 2 / np.where(small, w, 1.0) * (1 - x2 / 3 + x2 * x2 / 5)
+    ss = np.where(small, 1.0, s)
+    scale = np.where(small, series, 2 * np.arctan2(ss, w) / ss)
+    return v * scale[..., None]
+
+
+def so3_left_jacobian(phi: np.ndarray) -> np.ndarray:
+    """Left Jacobian J(phi) of SO(3), (...,3) -> (...,3,3): exp(phi + d) ~ exp(J d) exp(phi)."""
+    phi = _f64(phi)
+    _, B, C, _ = _coefficients(np.sum(phi * phi, axis=-1))
+    K = skew(phi)
+    return np.eye(3) + B[..., None, None] * K + C[..., None, None] * (K @ K)
+
+
+def so3_left_jacobian_inv(phi: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`so3_left_jacobian` in closed form (finite for angles up to pi)."""
+    phi = _f64(phi)
+    _, _, _, D = _coefficients(np.sum(phi * phi, axis=-1))
+    K = skew(phi)
+    return np.eye(3) - 0.5 * K + D[..., None, None] * (K @ K)
+
+
+def rotation_angle(R: np.ndarray) -> np.ndarray:
+    """Rotation angle in [0, pi] of (...,3,3) matrices (accurate near 0 and pi)."""
+    return np.linalg.norm(so3_log(R), axis=-1)
+
+
+def rotation_distance(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
+    """Geodesic distance (rad) between rotations: angle of R_a^T R_b."""
+    return rotation_angle(np.swapaxes(_f64(R_a), -1, -2) @ _f64(R_b))
+
+
+def project_to_so3(M: np.ndarray) -> np.ndarray:
+    """Nearest rotation matrix (Frobenius norm) to (...,3,3) matrices, via SVD."""
+    U, _, Vt = np.linalg.svd(_f64(M))
+    d = np.sign(np.linalg.det(U @ Vt))
+    d = np.where(d == 0, 1.0, d)
+    U = U.copy()
+    U[..., :, 2] *= d[..., None]
+    return U @ Vt
+
+
+# --------------------------------------------------------------------------------------- SE(3)
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """4x4 rigid motion exp of twists xi = (rho, phi) (...,6). Returns (...,4,4)."""
+    xi = _f64(xi)
+    rho, phi = xi[..., :3], xi[..., 3:]
+    return make_pose(so3_exp(phi), _matvec(so3_left_jacobian(phi), rho))
+
+
+def se3_log(T: np.ndarray) -> np.ndarray:
+    """Twist xi = (rho, phi) (...,6) of 4x4 rigid motions (...,4,4); rotation angle in [0, pi]."""
+    T = _f64(T)
+    phi = so3_log(T[..., :3, :3])
+    rho = _matvec(so3_left_jacobian_inv(phi), T[..., :3, 3])
+    return np.concatenate([rho, phi], axis=-1)
+
+
+def make_pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Homogeneous (...,4,4) transform from rotation (...,3,3) and translation (...,3)."""
+    R, t = _f64(R), _f64(t)
+    lead = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+    T = np.zeros((*lead, 4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def pose_inverse(T: np.ndarray) -> np.ndarray:
+    """Inverse of rigid (...,4,4) transforms (uses R^T, no general matrix inverse)."""
+    T = _f64(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    return make_pose(Rt, -_matvec(Rt, T[..., :3, 3]))
+
+
+def pose_compose(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A @ B for (...,4,4) transforms (apply B first)."""
+    return _f64(A) @ _f64(B)
+
+
+def transform_points(R: np.ndarray, t: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """R p + t for points p (...,N,3) with R (...,3,3), t (...,3). Returns (...,N,3)."""
+    return _f64(p) @ np.swapaxes(_f64(R), -1, -2) + _f64(t)[..., None, :]
+
+
+def relative_pose(
+    R_c0: np.ndarray, t_c0: np.ndarray, R_ch: np.ndarray, t_ch: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Hand pose relative to the fixed frame W0: R = R_c0^T R_ch, t = R_c0^T (t_ch - t_c0)."""
+    R_0t = np.swapaxes(_f64(R_c0), -1, -2)
+    return R_0t @ _f64(R_ch), _matvec(R_0t, _f64(t_ch) - _f64(t_c0))
+
+
+# --------------------------------------------------------------------------------- quaternions
+
+
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) (...,4) of rotation matrices (...,3,3), w >= 0.
+
+    Shepperd's method: build the candidate from the largest of 4w^2, 4x^2, 4y^2, 4z^2 so the
+    division is never by a small number. Ties at w == 0 (180 degrees) are broken like scipy:
+    the first non-zero of x, y, z is made positive.
+    """
+    R = _f64(R)
+    d0, d1, d2 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    tr = d0 + d1 + d2
+    # Sums and differences of the off-diagonal pairs: 4wx, 4wy, 4wz and 4xy, 4xz, 4yz.
+    wx, wy, wz = (
+        R[..., 2, 1] - R[..., 1, 2],
+        R[..., 0, 2] - R[..., 2, 0],
+        R[..., 1, 0] - R[..., 0, 1],
+    )
+    xy, xz, yz = (
+        R[..., 0, 1] + R[..., 1, 0],
+        R[..., 0, 2] + R[..., 2, 0],
+        R[..., 1, 2] + R[..., 2, 1],
+    )
+    cands = np.stack(
+        [
+            np.stack([wx, 1 + 2 * d0 - tr, xy, xz], -1),
+            np.stack([wy, xy, 1 + 2 * d1 - tr, yz], -1),
+            np.stack([wz, xz, yz, 1 + 2 * d2 - tr], -1),
+            np.stack([1 + tr, wx, wy, wz], -1),
+        ],
+        -2,
+    )
+    choice = np.argmax(np.stack([d0, d1, d2, tr], -1), axis=-1)
+    q = np.take_along_axis(cands, choice[..., None, None], axis=-2)[..., 0, :]
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return _quat_canonical(q)
+
+
+def _quat_canonical(q: np.ndarray) -> np.ndarray:
+    """Sign-fix quaternions: w > 0, or at w == 0 the first non-zero of x, y, z > 0."""
+    flip = q[..., 0] < 0
+    tie = q[..., 0] == 0
+    for k in (1, 2, 3):
+        flip |= tie & (q[..., k] < 0)
+        tie &= q[..., k] == 0
+    return np.where(flip[..., None], -q, q)
+
+
+def matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (...,3,3) of quaternions (w, x, y, z) (...,4); q is normalised first."""
+    q = _f64(q)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+# -------------------------------------------------------------------------------- Euler angles
+
+
+def _parse_seq(seq: str) -> tuple[list[int], bool]:
+    """Axis indices and 'intrinsic' flag; lowercase means extrinsic, as in scipy."""
+    if not isinstance(seq, str) or len(seq) != 3 or not (seq.isupper() or seq.islower()):
+        raise ValueError(f"Euler sequence must be 3 axes, all upper or all lower case, got {seq!r}")
+    try:
+        axes = [_AXIS_INDEX[c] for c in seq.upper()]
+    except KeyError:
+        raise ValueError(f"Euler sequence {seq!r} may only use the axes X, Y, Z") from None
+    if axes[0] == axes[1] or axes[1] == axes[2]:
+        raise ValueError(f"Euler sequence {seq!r} repeats an axis consecutively")
+    return axes, seq.isupper()
+
+
+def _axis_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
+    """Rotation matrix (...,3,3) about coordinate axis 0/1/2 by angle (...)."""
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros((*np.shape(angle), 3, 3))
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    R[..., axis, axis] = 1.0
+    R[..., i, i] = c
+    R[..., j, j] = c
+    R[..., j, i] = s
+    R[..., i, j] = -s
+    return R
+
+
+def matrix_from_euler(angles: np.ndarray, seq: str) -> np.ndarray:
+    """Rotation matrices (...,3,3) from Euler angles (...,3) in radians.
+
+    Uppercase ``seq`` is intrinsic: R = R_seq[0](a0) @ R_seq[1](a1) @ R_seq[2](a2), exactly
+    scipy's ``Rotation.from_euler(seq, angles).as_matrix()``. Lowercase is extrinsic, as in scipy.
+    """
+    angles = _f64(angles)
+    axes, intrinsic = _parse_seq(seq)
+    if not intrinsic:  # extrinsic (a0, a1, a2) about x,y,z == intrinsic (a2, a1, a0) about Z,Y,X
+        axes, angles = axes[::-1], angles[..., ::-1]
+    R = _axis_rotation(axes[0], angles[..., 0])
+    R = R @ _axis_rotation(axes[1], angles[..., 1])
+    return R @ _axis_rotation(axes[2], angles[..., 2])
+
+
+def euler_from_matrix(R: np.ndarray, seq: str) -> np.ndarray:
+    """Euler angles (...,3), radians, of rotation matrices (...,3,3); inverse of matrix_from_euler.
+
+    Same ranges as scipy's ``as_euler``: first and third angle in [-pi, pi), middle angle in
+    [-pi/2, pi/2] (Tait-Bryan, e.g. "YZX", "ZYX") or [0, pi] (proper Euler, e.g. "ZYZ"). Uses the
+    quaternion method of Bernardes & Viollet (2022), which stays accurate next to gimbal lock. At
+    exact lock the whole rotation goes on the first angle and the third is 0 (like scipy).
+    """
+    axes, intrinsic = _parse_seq(seq)
+    q = quat_from_matrix(R)
+    qw, qv = q[..., 0], q[..., 1:]
+    # The method is written for extrinsic sequences; intrinsic = extrinsic with axes reversed.
+    i, j, k = axes[::-1] if intrinsic else axes
+    proper = i == k
+    if proper:
+        k = 3 - i - j
+    sign = (i - j) * (j - k) * (k - i) // 2  # +1 for an even permutation of (x, y, z), else -1
+    if proper:
+        a, b, c, d = qw, qv[..., i], qv[..., j], qv[..., k] * sign
+    else:
+        a = qw - qv[..., j]
+        b = qv[..., i] + qv[..., k] * sign
+        c = qv[..., j] + qw
+        d = qv[..., k] * sign - qv[..., i]
+
+    middle = 2 * np.arctan2(np.hypot(c, d), np.hypot(a, b))  # in [0, pi]
+    half_sum = np.arctan2(b, a)
+    half_diff = np.arctan2(d, c)
+    lock0 = np.abs(middle) <= _GIMBAL_EPS
+    lock_pi = np.abs(middle - np.pi) <= _GIMBAL_EPS
+    regular = ~(lock0 | lock_pi)
+
+    # "first"/"last" are in the extrinsic (reversed) order used by the method.
+    locked = np.where(lock0, 2 * half_sum, 2 * half_diff * (-1 if not intrinsic else 1))
+    first = np.where(regular, half_sum - half_diff, np.where(intrinsic, 0.0, locked))
+    last = np.where(regular, half_sum + half_diff, np.where(intrinsic, locked, 0.0))
+    if not proper:
+        last = last * sign
+        middle = middle - np.pi / 2
+    # Intrinsic: the method's last angle is our first one.
+    first, last = (first + np.pi) % (2 * np.pi) - np.pi, (last + np.pi) % (2 * np.pi) - np.pi
+    # The middle angle is already in its range; not wrapping it keeps a proper sequence's pi
+    # at +pi (scipy would report -pi, the same rotation).
+    return np.stack([last, middle, first] if intrinsic else [first, middle, last], -1)
+
+
+# ---------------------------------------------------------------------------------- wrist angles
+
+
+def wrist_angles(R_rel: np.ndarray) -> np.ndarray:
+    """ISB wrist angles (deviation, flexion, pronation) (...,3), radians, of R_rel (...,3,3).
+
+    R_rel = Ry(flexion) @ Rz(deviation) @ Rx(pronation) (intrinsic Y-Z-X in hand axes,
+    DESIGN.md section 2). Note the output ORDER differs from the rotation order.
+    """
+    flex, dev, pron = np.moveaxis(euler_from_matrix(R_rel, ISB_WRIST_SEQUENCE), -1, 0)
+    return np.stack([dev, flex, pron], -1)
+
+
+def matrix_from_wrist_angles(
+    deviation: np.ndarray | float, flexion: np.ndarray | float, pronation: np.ndarray | float
+) -> np.ndarray:
+    """Inverse of :func:`wrist_angles`: Ry(flexion) @ Rz(deviation) @ Rx(pronation), (...,3,3)."""
+    dev, flex, pron = np.broadcast_arrays(_f64(deviation), _f64(flexion), _f64(pronation))
+    return matrix_from_euler(np.stack([flex, dev, pron], -1), ISB_WRIST_SEQUENCE)
