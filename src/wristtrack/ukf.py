@@ -1,0 +1,259 @@
+"""A generic augmented Unscented Kalman Filter whose state may live on a manifold.
+
+The state is an array ``x`` of the model's ambient size D (e.g. a flattened rotation matrix
+followed by vectors); its uncertainty is a covariance ``P`` on an n-dimensional tangent space.
+A model supplies a retraction ``retract(x, xi) -> X`` mapping tangent offsets (S, n) to states
+(S, D) and its inverse ``lift(x, X) -> xi`` (UKF on manifolds, Brossard et al. 2020). For a
+Euclidean state both are plain addition and subtraction and this is the textbook UKF.
+
+Process noise that enters non-linearly is appended to the state (the augmented UKF of Julier &
+Uhlmann, as the paper uses): sigma points are drawn jointly over (state error, noise) and the
+model's ``propagate(X, noise, dt)`` receives both. Every function handles all sigma points in
+one vectorised call.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Protocol
+
+import numpy as np
+
+
+class ManifoldModel(Protocol):
+    """What the filter needs to know about a state space and its dynamics."""
+
+    dim: int  # tangent (error-state) dimension n
+    noise_dim: int  # dimension q of the non-additive process noise appended to the state
+
+    def retract(self, x: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """States (S, D) at tangent offsets xi (S, n) from x (D,)."""
+
+    def lift(self, x: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Tangent offsets (S, n) of states X (S, D) from x (D,): the inverse of retract."""
+
+    def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
+        """States (S, D) one step of dt later, driven by noise samples (S, q)."""
+
+
+@dataclass(frozen=True)
+class SigmaWeights:
+    """Scaled unscented transform weights (van der Merwe) for dimension n."""
+
+    mean: np.ndarray  # (2n+1,)
+    cov: np.ndarray  # (2n+1,)
+    scale: float  # sqrt(n + lambda): sigma points sit at +- scale * columns of chol(P)
+
+
+@lru_cache(maxsize=64)
+def sigma_weights(
+    n: int, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0
+) -> SigmaWeights:
+    """Weights of the 2n+1 scaled sigma points, defined as FilterPy's MerweScaledSigmaPoints."""
+    lam = alpha**2 * (n + kappa) - n
+    mean = np.full(2 * n + 1, 0.5 / (n + lam))
+    cov = mean.copy()
+    mean[0] = lam / (n + lam)
+    cov[0] = lam / (n + lam) + (1.0 - alpha**2 + beta)
+    mean.setflags(write=False)
+    cov.setflags(write=False)
+    return SigmaWeights(mean, cov, float(np.sqrt(n + lam)))
+
+
+def symmetrise(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + P.swapaxes(-1, -2))
+
+
+def safe_cholesky(P: np.ndarray) -> np.ndarray:
+    """Lower factor L with L L^T ~= P, for a covariance that rounding may have made indefinite.
+
+    Tries plain Cholesky, then Cholesky with growing diagonal jitter, then falls back to the
+    eigen-decomposition with negative eigenvalues clipped, so it never raises on a finite P.
+    """
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        pass
+    P = symmetrise(P)
+    scale = max(float(np.max(np.abs(np.diag(P)))), 1e-300)
+    for k in range(-12, -5, 2):
+        try:
+            return np.linalg.cholesky(P + np.eye(P.shape[0]) * scale * 10.0**k)
+        except np.linalg.LinAlgError:
+            continue
+    values, vectors = np.linalg.eigh(P)
+    return vectors * np.sqrt(np.clip(values, scale * 1e-12, None))
+
+
+def sigma_offsets(P: np.ndarray, weights: SigmaWeights) -> np.ndarray:
+    """Tangent offsets (2n+1, n) of the sigma points: 0, +scale*L[:, k], -scale*L[:, k]."""
+    cols = weights.scale * safe_cholesky(P).T  # row k = column k of L
+    return np.concatenate((np.zeros((1, P.shape[0])), cols, -cols))
+
+
+@dataclass(frozen=True)
+class UKFParams:
+    alpha: float = 1.0
+    beta: float = 2.0
+    kappa: float = 0.0
+
+
+def predict(
+    model: ManifoldModel,
+    x: np.ndarray,
+    P: np.ndarray,
+    dt: float,
+    Q_noise: np.ndarray | None = None,
+    Q_additive: np.ndarray | None = None,
+    params: UKFParams = UKFParams(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Augmented UKF prediction: (state error, process noise) sigma points through the model.
+
+    ``Q_noise`` (q, q) is the covariance of the noise passed to ``model.propagate`` (augmented);
+    ``Q_additive`` (n, n), if given, is added to the predicted tangent covariance (the classic
+    additive-noise UKF; FilterPy's form).
+    """
+    n, q = model.dim, model.noise_dim
+    if q:
+        Pa = np.zeros((n + q, n + q))
+        Pa[:n, :n] = P
+        Pa[n:, n:] = Q_noise
+    else:
+        Pa = P
+    w = sigma_weights(n + q, params.alpha, params.beta, params.kappa)
+    offsets = sigma_offsets(Pa, w)
+    X = model.propagate(model.retract(x, offsets[:, :n]), offsets[:, n:], dt)
+    # The propagated centre point is the reference about which the spread is measured.
+    centre = X[0]
+    xi = model.lift(centre, X)
+    mean = w.mean @ xi
+    d = xi - mean
+    P_new = (d.T * w.cov) @ d
+    if Q_additive is not None:
+        P_new = P_new + Q_additive
+    x_new = model.retract(centre, mean[None])[0]
+    return x_new, symmetrise(P_new)
+
+
+@dataclass(frozen=True)
+class MeasurementPrediction:
+    """The unscented transform of the predicted state through a measurement function.
+
+    ``Y`` (S, m) are the transformed sigma points; ``y`` (m,) their mean; ``Pyy`` (m, m) their
+    spread (without measurement noise); ``Pxy`` (n, m) the state-measurement cross-covariance.
+    Rows may later be selected (visible or associated markers) without transforming again.
+    """
+
+    y: np.ndarray
+    Pyy: np.ndarray
+    Pxy: np.ndarray
+
+
+def predict_measurement(
+    model: ManifoldModel,
+    x: np.ndarray,
+    P: np.ndarray,
+    h,
+    params: UKFParams = UKFParams(),
+) -> MeasurementPrediction:
+    """Transform sigma points of (x, P) through h: states (S, D) -> measurements (S, m)."""
+    w = sigma_weights(model.dim, params.alpha, params.beta, params.kappa)
+    offsets = sigma_offsets(P, w)
+    Y = h(model.retract(x, offsets))
+    y = w.mean @ Y
+    dY = Y - y
+    wdY = dY * w.cov[:, None]
+    # offsets have zero weighted mean by symmetry, so they are already centred
+    return MeasurementPrediction(y, dY.T @ wdY, offsets.T @ wdY)
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    x: np.ndarray
+    P: np.ndarray
+    nis: float  # normalised innovation squared
+    dof: int  # measurement dimension used
+
+
+def update(
+    model: ManifoldModel,
+    x: np.ndarray,
+    P: np.ndarray,
+    pred: MeasurementPrediction,
+    z: np.ndarray,
+    R: np.ndarray,
+    rows: np.ndarray | None = None,
+) -> UpdateResult:
+    """Kalman correction with measurement z (k,) of rows ``rows`` of the prediction (all if None).
+
+    R is (k, k) or the diagonal (k,). Solves with a Cholesky factor of the innovation covariance
+    instead of forming its inverse.
+    """
+    if rows is None:
+        y, Pyy, Pxy = pred.y, pred.Pyy, pred.Pxy
+    else:
+        y, Pyy, Pxy = pred.y[rows], pred.Pyy[np.ix_(rows, rows)], pred.Pxy[:, rows]
+    S = Pyy + (np.diag(R) if R.ndim == 1 else R)
+    L = safe_cholesky(S)
+    innovation = z - y
+    # K = Pxy S^-1 = (L^-T L^-1 Pxy^T)^T, via two triangular-shaped solves
+    A = np.linalg.solve(L, Pxy.T)  # L^-1 Pxy^T
+    e = np.linalg.solve(L, innovation)  # whitened innovation
+    K = np.linalg.solve(L.T, A).T
+    x_new = model.retract(x, (K @ innovation)[None])[0]
+    P_new = P - A.T @ A
+    return UpdateResult(x_new, symmetrise(P_new), float(e @ e), int(z.shape[0]))
+
+
+class EuclideanModel:
+    """A model on R^n given by a propagation function; the retraction is addition."""
+
+    def __init__(self, dim: int, f, noise_dim: int = 0):
+        self.dim, self.noise_dim, self._f = dim, noise_dim, f
+
+    def retract(self, x: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        return x + xi
+
+    def lift(self, x: np.ndarray, X: np.ndarray) -> np.ndarray:
+        return X - x
+
+    def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
+        return self._f(X, noise, dt)
+
+
+def pda_update(
+    model: ManifoldModel,
+    x: np.ndarray,
+    P: np.ndarray,
+    pred: MeasurementPrediction,
+    R: np.ndarray,
+    groups: list[np.ndarray],
+    candidates: list[np.ndarray],
+    weights: list[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Probabilistic data association update over several measurement groups (e.g. markers).
+
+    Group g owns rows ``groups[g]`` of the prediction; ``candidates[g]`` (c, k) are the
+    measurements that may be its, with association probabilities ``weights[g]`` (c,) (their
+    sum is the probability the group was detected at all). The unscented prediction is turned
+    into its statistical linear regression y ~ y_hat + H dx + e, cov(e) = Pyy - H P H^T + R,
+    and the groups are absorbed one after another with the PDA formula (Bar-Shalom & Tse), so
+    each group's spread of hypotheses widens the covariance instead of being ignored.
+    Returns (x, P).
+    """
+    H = np.linalg.solve(P, pred.Pxy).T  # (m, n) regression of y on the tangent error
+    E = pred.Pyy - H @ P @ H.T + (np.diag(R) if R.ndim == 1 else R)
+    dx = np.zeros(model.dim)
+    for rows, Z, beta in zip(groups, candidates, weights, strict=True):
+        if len(beta) == 0 or beta.sum() <= 0:
+            continue
+        Hg = H[rows]
+        S = Hg @ P @ Hg.T + E[np.ix_(rows, rows)]
+        K = np.linalg.solve(S, Hg @ P).T
+        nu_i = Z - (pred.y[rows] + Hg @ dx)  # (c, k) innovations under the current correction
+        nu = beta @ nu_i
+        spread = (nu_i.T * beta) @ nu_i - np.outer(nu, nu)
+        dx = dx + K @ nu
+        P = P - beta.sum() * (K @ S @ K.T) + K @ spread @ K.T
+    return model.retract(x, dx[None])[0], symmetrise(P)
