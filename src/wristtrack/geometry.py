@@ -79,32 +79,69 @@ def _coefficients(theta2: np.ndarray) -> tuple[np.ndarray, ...]:
     return A, B, C, D
 
 
+# Maps a vector a (3,) to its cross-product matrix, flattened row-major: skew(a).reshape(9).
+_SKEW_MAP = np.array(
+    [
+        [0, 0, 0, 0, 0, -1, 0, 1, 0],
+        [0, 0, 1, 0, 0, 0, -1, 0, 0],
+        [0, -1, 0, 1, 0, 0, 0, 0, 0],
+    ],
+    dtype=np.float64,
+)
+_EYE9 = np.eye(3).reshape(9)
+
+
 def so3_exp(phi: np.ndarray) -> np.ndarray:
-    """Rotation matrix exp([phi]x) of rotation vectors (...,3) (Rodrigues). Returns (...,3,3)."""
+    """Rotation matrix exp([phi]x) of rotation vectors (...,3) (Rodrigues). Returns (...,3,3).
+
+    R = cos(t) I + (sin t / t) [phi]x + ((1 - cos t) / t^2) phi phi^T. Written as a few whole-
+    array operations because it sits on the filter's hot path (every sigma point, every
+    frame); 1 - cos t is computed as 2 sin^2(t/2) so small angles lose no digits.
+    """
     phi = _f64(phi)
-    A, B, _, _ = _coefficients(np.sum(phi * phi, axis=-1))
-    K = skew(phi)
-    return np.eye(3) + A[..., None, None] * K + B[..., None, None] * (K @ K)
+    t2 = np.einsum("...i,...i->...", phi, phi)
+    small = t2 < 1e-12
+    t = np.sqrt(np.where(small, 1.0, t2))
+    half = np.sin(0.5 * t) / t
+    A = np.where(small, 1.0 - t2 / 6.0, np.sin(t) / t)  # sin t / t
+    B = np.where(small, 0.5 - t2 / 24.0, 2.0 * half * half)  # (1 - cos t) / t^2
+    outer = (B[..., None] * phi)[..., :, None] * phi[..., None, :]
+    flat = (A[..., None] * phi) @ _SKEW_MAP + (1.0 - B * t2)[..., None] * _EYE9
+    return outer + flat.reshape(phi.shape[:-1] + (3, 3))
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (...,3) of rotation matrices (...,3,3); angle in [0, pi].
 
-    Goes through the quaternion (Shepperd's method picks the largest of w, x, y, z, i.e. the
-    largest diagonal of the symmetric part near pi), so it is accurate near 0 and near pi, and
-    the axis sign near pi comes from the antisymmetric part (w >= 0), not from noise.
+    Up to about 150 degrees: the antisymmetric part gives sin(t) axis and the trace cos(t), and
+    atan2 of the two is accurate at every angle in that range (the common case, on the
+    filter's hot path). Beyond, the antisymmetric part fades and the axis comes from the
+    quaternion (Shepperd's method picks the largest diagonal of the symmetric part), with the
+    sign near pi from the antisymmetric part (w >= 0), not from noise.
     """
+    R = _f64(R)
+    v = 0.5 * np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        -1,
+    )
+    s = np.sqrt(np.einsum("...i,...i->...", v, v))  # sin t
+    c = 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0)  # cos t
+    t = np.arctan2(s, c)
+    # t / sin t, with its series below 1e-4 rad where the division loses digits
+    ratio = np.where(s < 1e-4, 1.0 + t * t / 6.0, t / np.where(s < 1e-4, 1.0, s))
+    out = v * ratio[..., None]
+    far = c < -0.85
+    if np.any(far):
+        out[far] = _so3_log_quaternion(R[far])
+    return out
+
+
+def _so3_log_quaternion(R: np.ndarray) -> np.ndarray:
+    """so3_log through the quaternion: accurate up to and at pi."""
     q = quat_from_matrix(R)
     w, v = q[..., 0], q[..., 1:]
     s = np.linalg.norm(v, axis=-1)
-    small = s < 1e-4
-    # angle / s = 2 atan2(s, w) / s. For small s (then w ~ 1) use atan(x)/x ~ 1 - x^2/3 + x^4/5
-    # with x = s / w, to avoid 0 / 0 at the identity.
-    x2 = (s / np.where(small, w, 1.0)) ** 2
-    series = 2 / np.where(small, w, 1.0) * (1 - x2 / 3 + x2 * x2 / 5)
-    ss = np.where(small, 1.0, s)
-    scale = np.where(small, series, 2 * np.arctan2(ss, w) / ss)
-    return v * scale[..., None]
+    return v * (2 * np.arctan2(s, w) / s)[..., None]
 
 
 def so3_left_jacobian(phi: np.ndarray) -> np.ndarray:
