@@ -36,8 +36,10 @@ class ProcessNoise:
     irregular frame intervals.
     """
 
-    linear_accel: float = 2.0  # (m/s^2)^2 s, random-walk linear acceleration
-    angular_accel: float = 60.0  # (rad/s^2)^2 s, default model: random-walk angular acceleration
+    # Tuned on the simulated scenarios (smooth range-of-motion cycles and reaches): lower values
+    # trade lag in fast motion for less noise at rest; see docs/BENCHMARKS.md.
+    linear_accel: float = 0.1  # (m/s^2)^2 s, random-walk linear acceleration
+    angular_accel: float = 2.5  # (rad/s^2)^2 s, default model: random-walk angular acceleration
     angular_rate: float = 0.5  # (rad/s)^2 s, paper model: random-walk orientation
 
 

@@ -1,0 +1,296 @@
+"""The tracker: one frame of detections in, one wrist estimate out.
+
+A small state machine: ``initialising`` until the least-squares initialisation succeeds, then
+``tracking`` (``coasting`` for a frame where no marker could be associated), ``lost`` after too
+many frames with too few markers, from where it re-initialises by itself by fitting the layout.
+The fixed frame W0 is the hand frame of the first initialisation and never moves afterwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+
+import numpy as np
+
+from wristtrack import associate as assoc
+from wristtrack import ukf
+from wristtrack.camera import Camera
+from wristtrack.errors import InitialisationError, InputError
+from wristtrack.geometry import so3_log
+from wristtrack.hand import HandLayout
+from wristtrack.initialise import initialise
+from wristtrack.measurements import Detections
+from wristtrack.motion import MODELS, ProcessNoise
+from wristtrack.observation import MarkerObservation, MeasurementNoise
+
+
+class Status(StrEnum):
+    INITIALISING = "initialising"  # no estimate yet: waiting for all six markers
+    TRACKING = "tracking"  # estimate updated with this frame's markers
+    COASTING = "coasting"  # estimate predicted only: no marker associated in this frame
+    LOST = "lost"  # too long without enough markers: no estimate, re-initialising
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    model: str = "default"  # "default" (SO(3) error state, constant rate) or "paper"
+    association: str = "gnn"  # "gnn", "jpda" or "paper"
+    use_depth: bool = True  # depth of each marker in every update (when the frame has depth)
+    measurement: MeasurementNoise = MeasurementNoise()
+    process: ProcessNoise = ProcessNoise()
+    association_params: assoc.AssociationParams = assoc.AssociationParams()
+    ukf: ukf.UKFParams = ukf.UKFParams()
+    min_markers: int = 3  # fewer associated markers than this counts towards being lost
+    lost_after: int = 15  # consecutive such frames before declaring the track lost
+    max_gap: float = 0.5  # s; a longer gap between frames loses the track
+    facing_cos: float = 0.05  # a marker whose palm faces away more than this is not expected
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"unknown model {self.model!r}; choose one of {', '.join(MODELS)}")
+        if self.association not in assoc.METHODS:
+            raise ValueError(
+                f"unknown association {self.association!r}; choose one of "
+                f"{', '.join(assoc.METHODS)}"
+            )
+
+    @classmethod
+    def paper(cls, **kw) -> TrackerConfig:
+        """The paper's method: Euler-angle state, per-blob association, depth only to initialise."""
+        return cls(model="paper", association="paper", use_depth=False, **kw)
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """The estimate for one frame. Poses are NaN where ``status`` has no estimate."""
+
+    frame: int
+    timestamp: float
+    status: Status
+    R_ch: np.ndarray  # (3,3) hand -> camera
+    t_ch: np.ndarray  # (3,) wrist in camera coordinates, m
+    R: np.ndarray  # (3,3) hand relative to W0
+    p: np.ndarray  # (3,) wrist in W0, m
+    v: np.ndarray  # (3,) m/s in W0
+    w: np.ndarray  # (3,) rad/s in W0
+    cov: np.ndarray | None  # tangent covariance of the state
+    labels: np.ndarray  # (M,) marker index per blob, -1 = clutter
+    n_visible: int  # markers associated in this frame
+    n_clutter: int  # blobs taken as clutter
+    nis: float = np.nan  # normalised innovation squared of the update
+    nis_dof: int = 0
+
+    @property
+    def has_estimate(self) -> bool:
+        return self.status in (Status.TRACKING, Status.COASTING)
+
+
+_NAN3 = np.full(3, np.nan)
+_NAN33 = np.full((3, 3), np.nan)
+
+
+@dataclass
+class _Track:
+    x: np.ndarray
+    P: np.ndarray
+    timestamp: float
+    weak_frames: int = 0
+    R_prev: np.ndarray | None = None
+
+
+@dataclass
+class Tracker:
+    """Feed ``step`` one frame of detections at a time, in time order."""
+
+    camera: Camera
+    layout: HandLayout | None = None
+    config: TrackerConfig = field(default_factory=TrackerConfig)
+
+    def __post_init__(self) -> None:
+        self.model = MODELS[self.config.model](self.config.process)
+        self.assoc_params = replace(self.config.association_params, image_area=self.camera.area)
+        self.R_c0: np.ndarray | None = None
+        self.t_c0: np.ndarray | None = None
+        self._track: _Track | None = None
+        self._obs: dict[bool, MarkerObservation] = {}
+        self._frame = -1
+        self._last_timestamp = -np.inf
+        self.status = Status.INITIALISING
+
+    # ------------------------------------------------------------------------------- stepping
+
+    def step(self, det: Detections, labels: np.ndarray | None = None) -> FrameResult:
+        """Process one frame. ``labels`` (M,) optionally names the blobs for initialisation."""
+        if det.timestamp <= self._last_timestamp:
+            raise InputError(
+                f"timestamp {det.timestamp} s does not follow {self._last_timestamp} s; "
+                "frames must come in strictly increasing time"
+            )
+        self._frame += 1
+        self._last_timestamp = det.timestamp
+        track = self._track
+        if track is not None and det.timestamp - track.timestamp > self.config.max_gap:
+            self._lose()
+            track = None
+        if track is None:
+            return self._try_initialise(det, labels)
+        return self._track_frame(det, track)
+
+    def _lose(self) -> None:
+        self._track = None
+        self.status = Status.LOST
+
+    def _empty(self, det: Detections, status: Status) -> FrameResult:
+        return FrameResult(
+            self._frame, det.timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3, _NAN3,
+            None, np.full(det.count, assoc.CLUTTER), 0, det.count,
+        )
+
+    def _try_initialise(self, det: Detections, labels: np.ndarray | None) -> FrameResult:
+        try:
+            init = initialise(det, self.camera, self.layout, labels=labels)
+        except InitialisationError:
+            return self._empty(det, self.status)
+        if self.R_c0 is None:  # the first initialisation fixes W0 for good
+            self.R_c0, self.t_c0 = init.R_ch, init.t_ch
+            self.layout = init.layout
+        R = self.R_c0.T @ init.R_ch
+        p = self.R_c0.T @ (init.t_ch - self.t_c0)
+        # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
+        rot = np.kron(np.eye(2), self.R_c0.T)
+        pose_cov = rot @ init.cov @ rot.T
+        x = self.model.initial_state(R, p)
+        P = self.model.initial_covariance(pose_cov)
+        self._track = _Track(x, P, det.timestamp, R_prev=R)
+        self.status = Status.TRACKING
+        n_markers = int(np.sum(init.labels >= 0))
+        return self._result(det, Status.TRACKING, init.labels, n_markers, np.nan, 0)
+
+    def _observation(self, use_depth: bool) -> MarkerObservation:
+        if use_depth not in self._obs:
+            self._obs[use_depth] = MarkerObservation(
+                self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
+                use_depth, self.config.measurement,
+            )
+        return self._obs[use_depth]
+
+    def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
+        cfg, model = self.config, self.model
+        dt = det.timestamp - track.timestamp
+        x, P = ukf.predict(model, track.x, track.P, dt, model.process_noise(dt), params=cfg.ukf)
+        use_depth = cfg.use_depth and det.depth is not None
+        obs = self._observation(use_depth)
+        k = obs.k
+        pred = ukf.predict_measurement(model, x, P, obs, params=cfg.ukf)
+        r_var = obs.noise_variance(pred.y)
+        expected = self._expected_markers(x, obs)
+
+        n_markers = obs.n_markers
+        y_hat = pred.y.reshape(n_markers, k)[expected]
+        S = _diagonal_blocks(pred.Pyy, n_markers, k)[expected] + _diag_blocks(r_var, n_markers, k)[
+            expected
+        ]
+        z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
+        llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, self.assoc_params)
+        gated = assoc.gate(d2, z, self.assoc_params)
+        marker_ids = np.flatnonzero(expected)
+
+        nis, dof = np.nan, 0
+        if cfg.association == "jpda":
+            beta = assoc.jpda_marginals(assoc.pair_scores(llr, self.assoc_params), gated)
+            labels = assoc.labels_from_marginals(beta)
+            x, P = self._jpda_update(x, P, pred, r_var, z, beta, marker_ids, k)
+        else:
+            if cfg.association == "gnn":
+                local = assoc.associate_gnn(assoc.pair_scores(llr, self.assoc_params), gated)
+            else:
+                local = assoc.associate_paper(llr, self.assoc_params)
+            labels = np.full(det.count, assoc.CLUTTER)
+            labels[local >= 0] = marker_ids[local[local >= 0]]
+            rows, values = _stack_rows(labels, z, k)
+            if rows.size:
+                res = ukf.update(model, x, P, pred, values, r_var[rows], rows=rows)
+                x, P, nis, dof = res.x, res.P, res.nis, res.dof
+
+        n_assoc = int(np.unique(labels[labels >= 0]).size)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            self._lose()  # never let a numerical failure leak out as an estimate
+            return self._empty(det, Status.LOST)
+        track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
+        if track.weak_frames > cfg.lost_after:
+            self._lose()
+            return self._empty(det, Status.LOST)
+        track.x, track.P, track.timestamp = x, P, det.timestamp
+        status = Status.TRACKING if n_assoc else Status.COASTING
+        self.status = status
+        return self._result(det, status, labels, n_assoc, nis, dof, dt)
+
+    def _expected_markers(self, x: np.ndarray, obs: MarkerObservation) -> np.ndarray:
+        """Markers that can be seen at the predicted pose: in the image, palm not turned away."""
+        pts = obs.marker_points(x[None])[0]
+        R_rel, _ = self.model.pose(x[None])
+        normal = (self.R_c0 @ R_rel[0])[:, 2]
+        facing = -(pts @ normal) / np.linalg.norm(pts, axis=1)
+        uv = self.camera.project(pts)
+        return (facing > self.config.facing_cos) & self.camera.in_image(uv) & (pts[:, 2] > 0)
+
+    def _jpda_update(self, x, P, pred, r_var, z, beta, marker_ids, k):
+        groups, candidates, weights = [], [], []
+        for col, j in enumerate(marker_ids):
+            hit = np.flatnonzero(beta[:, col] > 1e-6)
+            if hit.size == 0:
+                continue
+            Z = z[hit].copy()
+            if k == 3:  # a blob without depth carries no depth information: use the prediction
+                missing = ~np.isfinite(Z[:, 2])
+                Z[missing, 2] = pred.y[j * k + 2]
+            groups.append(np.arange(j * k, j * k + k))
+            candidates.append(Z)
+            weights.append(beta[hit, col])
+        if not groups:
+            return x, P
+        return ukf.pda_update(self.model, x, P, pred, r_var, groups, candidates, weights)
+
+    # -------------------------------------------------------------------------------- output
+
+    def _result(self, det, status, labels, n_assoc, nis, dof, dt=None) -> FrameResult:
+        track = self._track
+        R_rel, p = self.model.pose(track.x[None])
+        R_rel, p = R_rel[0], p[0]
+        v, w = self.model.velocities(track.x)
+        if np.isnan(w).all():  # the paper's state has no rate: differentiate the orientation
+            w = (
+                so3_log(R_rel @ track.R_prev.T) / dt
+                if dt and track.R_prev is not None
+                else np.zeros(3)
+            )
+        track.R_prev = R_rel
+        R_ch = self.R_c0 @ R_rel
+        t_ch = self.R_c0 @ p + self.t_c0
+        n_clutter = int(np.sum(labels < 0))
+        return FrameResult(
+            self._frame, det.timestamp, status, R_ch, t_ch, R_rel, p, v.copy(), w, track.P.copy(),
+            labels, n_assoc, n_clutter, nis, dof,
+        )
+
+
+def _diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
+    """The n diagonal (k, k) blocks of A (n*k, n*k) as an (n, k, k) array."""
+    idx = np.arange(n)[:, None] * k + np.arange(k)
+    return A[idx[:, :, None], idx[:, None, :]]
+
+
+def _diag_blocks(d: np.ndarray, n: int, k: int) -> np.ndarray:
+    out = np.zeros((n, k, k))
+    out[:, np.arange(k), np.arange(k)] = d.reshape(n, k)
+    return out
+
+
+def _stack_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Measurement rows and values of the associated blobs (a blob's NaN depth is left out)."""
+    blobs = np.flatnonzero(labels >= 0)
+    rows = labels[blobs, None] * k + np.arange(k)
+    values = z[blobs]
+    ok = np.isfinite(values)
+    return rows[ok], values[ok]
