@@ -22,7 +22,7 @@ bench: $(STAMP)
 	$(PY) -m wristtrack.bench --out docs/BENCHMARKS.md
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests benchmarks
+	$(VENV)/bin/ruff check src tests
 
 clean:
 	rm -rf $(VENV) build src/*.egg-info .pytest_cache
