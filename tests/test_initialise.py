@@ -113,6 +113,12 @@ def test_refine_with_distortion_and_missing_marker():
     fit = refine_pose(uv, z, cam, LAYOUT, R0, t0)
     assert _angle(fit.R_ch, R) < 1e-9 and np.linalg.norm(fit.t_ch - t) < 1e-9
     assert fit.dof == 5 * 3 - 6
+    # Labelling undistorts the blobs too: shuffled blobs plus clutter, through initialise.
+    uv = _project(R, t, LAYOUT.points, cam)
+    blobs, order = np.vstack([uv, [[40.0, 400.0]]]), np.array([3, 6, 0, 5, 1, 4, 2])
+    res = initialise(Detections(0.0, blobs[order], np.append(z, 1.2)[order]), cam, LAYOUT)
+    assert np.array_equal(res.labels, np.where(order < 6, order, -1))
+    assert _angle(res.R_ch, R) < 1e-9 and np.linalg.norm(res.t_ch - t) < 1e-9
 
 
 def test_refine_never_diverges_from_a_bad_start():
@@ -241,7 +247,8 @@ def test_label_markers_refuses_bad_input():
 def _subject(rng) -> HandLayout:
     """A hand unlike the default template: other size and proportions."""
     lengths = np.array([0.045, 0.085, 0.088, 0.083, 0.076]) * rng.uniform(0.9, 1.15)
-    angles = np.radians([50, 16, 0, -14, -28]) + np.radians([3, 2, 0, 2, 2]) * rng.normal(size=5)
+    jitter = np.radians([4, 2.5, 0, 2.5, 2.5]) * rng.uniform(-1, 1, 5)
+    angles = np.radians([50, 16, 0, -14, -28]) + jitter
     return HandLayout.from_paper(lengths * rng.uniform(0.96, 1.04, 5), angles)
 
 

@@ -21,8 +21,8 @@ def _kalman_filter(x, P, F, Q, H, R, zs):
     return out
 
 
-@pytest.mark.parametrize("augmented", [False, True])
-def test_ukf_reduces_to_kalman_filter_on_linear_gaussian_problem(augmented):
+@pytest.mark.parametrize("mode", ["additive", "augmented", "fused"])
+def test_ukf_reduces_to_kalman_filter_on_linear_gaussian_problem(mode):
     rng = np.random.default_rng(1)
     n, m, q = 4, 2, 2
     F = np.eye(n) + 0.1 * rng.standard_normal((n, n))
@@ -34,7 +34,7 @@ def test_ukf_reduces_to_kalman_filter_on_linear_gaussian_problem(augmented):
     x0, P0 = rng.standard_normal(n), np.eye(n)
     zs = rng.standard_normal((15, m))
 
-    if augmented:
+    if mode != "additive":
         model = ukf.EuclideanModel(n, lambda X, N, dt: X @ F.T + N @ G.T, noise_dim=q)
         kw = {"Q_noise": Qn}
     else:
@@ -43,8 +43,13 @@ def test_ukf_reduces_to_kalman_filter_on_linear_gaussian_problem(augmented):
     x, P = x0, P0
     params = ukf.UKFParams(alpha=0.7, beta=2.0, kappa=1.0)
     for z, (x_kf, P_kf) in zip(zs, _kalman_filter(x0, P0, F, Q, H, R, zs), strict=True):
-        x, P = ukf.predict(model, x, P, 1.0, params=params, **kw)
-        pred = ukf.predict_measurement(model, x, P, lambda X: X @ H.T, params=params)
+        if mode == "fused":  # measurement sigma points = the propagated ones
+            x, P, pred = ukf.predict_with_measurement(
+                model, x, P, 1.0, Qn, lambda X: X @ H.T, params=params
+            )
+        else:
+            x, P = ukf.predict(model, x, P, 1.0, params=params, **kw)
+            pred = ukf.predict_measurement(model, x, P, lambda X: X @ H.T, params=params)
         res = ukf.update(model, x, P, pred, z, R)
         x, P = res.x, res.P
         np.testing.assert_allclose(x, x_kf, atol=1e-9, rtol=0)

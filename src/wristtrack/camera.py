@@ -179,11 +179,15 @@ class Camera:
         No visibility test: points with z <= 0 give meaningless (or infinite) pixels; check z.
         """
         p = np.asarray(points, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy = p[..., :2] / p[..., 2:3]
+        z = p[..., 2:3]
+        if np.all(z != 0):  # the common case, without the cost of an errstate context
+            xy = p[..., :2] / z
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                xy = p[..., :2] / z
         if self.has_distortion:
             xy = self._distort(xy)[0]
-        return np.stack([self.fx * xy[..., 0] + self.cx, self.fy * xy[..., 1] + self.cy], -1)
+        return xy * np.array([self.fx, self.fy]) + np.array([self.cx, self.cy])
 
     def normalize(self, uv: np.ndarray) -> np.ndarray:
         """Undistorted normalised coordinates (x/z, y/z) (...,2) of pixels (...,2)."""

@@ -100,11 +100,12 @@ def so3_exp(phi: np.ndarray) -> np.ndarray:
     """
     phi = _f64(phi)
     t2 = np.einsum("...i,...i->...", phi, phi)
-    small = t2 < 1e-12
-    t = np.sqrt(np.where(small, 1.0, t2))
+    # sin is accurate to the last bit for tiny arguments, so sin(t)/t and sin(t/2)/t are exact
+    # down to t = 1e-150 (where they are 1 and 1/2): no branch for small angles is needed.
+    t = np.sqrt(t2 + 1e-300)
     half = np.sin(0.5 * t) / t
-    A = np.where(small, 1.0 - t2 / 6.0, np.sin(t) / t)  # sin t / t
-    B = np.where(small, 0.5 - t2 / 24.0, 2.0 * half * half)  # (1 - cos t) / t^2
+    A = np.sin(t) / t  # sin t / t
+    B = 2.0 * half * half  # (1 - cos t) / t^2
     outer = (B[..., None] * phi)[..., :, None] * phi[..., None, :]
     flat = (A[..., None] * phi) @ _SKEW_MAP + (1.0 - B * t2)[..., None] * _EYE9
     return outer + flat.reshape(phi.shape[:-1] + (3, 3))

@@ -178,11 +178,12 @@ class Tracker:
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg, model = self.config, self.model
         dt = det.timestamp - track.timestamp
-        x, P = ukf.predict(model, track.x, track.P, dt, model.process_noise(dt), params=cfg.ukf)
         use_depth = cfg.use_depth and det.depth is not None
         obs = self._observation(use_depth)
         k = obs.k
-        pred = ukf.predict_measurement(model, x, P, obs, params=cfg.ukf)
+        x, P, pred = ukf.predict_with_measurement(
+            model, track.x, track.P, dt, model.process_noise(dt), obs, params=cfg.ukf
+        )
         r_var = obs.noise_variance(pred.y)
         expected = self._expected_markers(x, obs)
 
@@ -230,10 +231,10 @@ class Tracker:
         """Markers that can be seen at the predicted pose: in the image, palm not turned away."""
         pts = obs.marker_points(x[None])[0]
         R_rel, _ = self.model.pose(x[None])
-        normal = (self.R_c0 @ R_rel[0])[:, 2]
-        facing = -(pts @ normal) / np.linalg.norm(pts, axis=1)
-        uv = self.camera.project(pts)
-        return (facing > self.config.facing_cos) & self.camera.in_image(uv) & (pts[:, 2] > 0)
+        normal = self.R_c0 @ R_rel[0, :, 2]
+        facing = -(pts @ normal) / np.sqrt(np.einsum("ij,ij->i", pts, pts))
+        ok = (facing > self.config.facing_cos) & (pts[:, 2] > 0)
+        return ok & self.camera.in_image(self.camera.project(pts))
 
     def _jpda_update(self, x, P, pred, r_var, z, beta, marker_ids, k):
         groups, candidates, weights = [], [], []

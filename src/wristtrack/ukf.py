@@ -99,6 +99,27 @@ class UKFParams:
     kappa: float = 0.0
 
 
+def _propagate_sigma_points(model, x, P, dt, Q_noise, params):
+    """Augmented sigma points of (x, P, Q_noise) pushed through the model: the propagated states
+    X (S, D), their tangent offsets d (S, n) from the predicted mean, the mean and the weights."""
+    n, q = model.dim, model.noise_dim
+    if q:
+        Pa = np.zeros((n + q, n + q))
+        Pa[:n, :n] = P
+        Pa[n:, n:] = Q_noise
+    else:
+        Pa = P
+    w = sigma_weights(n + q, params.alpha, params.beta, params.kappa)
+    offsets = sigma_offsets(Pa, w)
+    X = model.propagate(model.retract(x, offsets[:, :n]), offsets[:, n:], dt)
+    # The propagated centre point is the reference about which the spread is measured.
+    centre = X[0]
+    xi = model.lift(centre, X)
+    mean = w.mean @ xi
+    x_new = model.retract(centre, mean[None])[0]
+    return X, xi - mean, x_new, w
+
+
 def predict(
     model: ManifoldModel,
     x: np.ndarray,
@@ -114,25 +135,10 @@ def predict(
     ``Q_additive`` (n, n), if given, is added to the predicted tangent covariance (the classic
     additive-noise UKF; FilterPy's form).
     """
-    n, q = model.dim, model.noise_dim
-    if q:
-        Pa = np.zeros((n + q, n + q))
-        Pa[:n, :n] = P
-        Pa[n:, n:] = Q_noise
-    else:
-        Pa = P
-    w = sigma_weights(n + q, params.alpha, params.beta, params.kappa)
-    offsets = sigma_offsets(Pa, w)
-    X = model.propagate(model.retract(x, offsets[:, :n]), offsets[:, n:], dt)
-    # The propagated centre point is the reference about which the spread is measured.
-    centre = X[0]
-    xi = model.lift(centre, X)
-    mean = w.mean @ xi
-    d = xi - mean
+    _, d, x_new, w = _propagate_sigma_points(model, x, P, dt, Q_noise, params)
     P_new = (d.T * w.cov) @ d
     if Q_additive is not None:
         P_new = P_new + Q_additive
-    x_new = model.retract(centre, mean[None])[0]
     return x_new, symmetrise(P_new)
 
 
@@ -168,6 +174,30 @@ def predict_measurement(
     return MeasurementPrediction(y, dY.T @ wdY, offsets.T @ wdY)
 
 
+def predict_with_measurement(
+    model: ManifoldModel,
+    x: np.ndarray,
+    P: np.ndarray,
+    dt: float,
+    Q_noise: np.ndarray,
+    h,
+    params: UKFParams = UKFParams(),
+) -> tuple[np.ndarray, np.ndarray, MeasurementPrediction]:
+    """Prediction and measurement prediction from one set of augmented sigma points.
+
+    The propagated sigma points already carry the predicted mean and covariance (process noise
+    included), so they are transformed through h directly instead of being drawn again: one
+    Cholesky factor and one retraction less per frame. Returns (x, P, prediction).
+    """
+    X, d, x_new, w = _propagate_sigma_points(model, x, P, dt, Q_noise, params)
+    wd = d * w.cov[:, None]
+    P_new = symmetrise(d.T @ wd)
+    Y = h(X)
+    y = w.mean @ Y
+    dY = Y - y
+    return x_new, P_new, MeasurementPrediction(y, dY.T @ (dY * w.cov[:, None]), wd.T @ dY)
+
+
 @dataclass(frozen=True)
 class UpdateResult:
     x: np.ndarray
@@ -197,11 +227,11 @@ def update(
     S = Pyy + (np.diag(R) if R.ndim == 1 else R)
     L = safe_cholesky(S)
     innovation = z - y
-    # K = Pxy S^-1 = (L^-T L^-1 Pxy^T)^T, via two triangular-shaped solves
-    A = np.linalg.solve(L, Pxy.T)  # L^-1 Pxy^T
-    e = np.linalg.solve(L, innovation)  # whitened innovation
-    K = np.linalg.solve(L.T, A).T
-    x_new = model.retract(x, (K @ innovation)[None])[0]
+    # With S = L L^T, A = L^-1 Pxy^T and e = L^-1 nu (one solve for both):
+    # K nu = Pxy S^-1 nu = A^T e, K S K^T = A^T A, and the NIS nu^T S^-1 nu = e^T e.
+    Ae = np.linalg.solve(L, np.column_stack((Pxy.T, innovation)))
+    A, e = Ae[:, :-1], Ae[:, -1]
+    x_new = model.retract(x, (A.T @ e)[None])[0]
     P_new = P - A.T @ A
     return UpdateResult(x_new, symmetrise(P_new), float(e @ e), int(z.shape[0]))
 
