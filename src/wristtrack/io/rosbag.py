@@ -1,0 +1,514 @@
+"""ROS 1 .bag files and ROS 2 bag folders of an RGB-D driver, through the pure-Python ``rosbags``.
+
+Reads sensor_msgs/Image (or CompressedImage) colour, registered depth and sensor_msgs/CameraInfo.
+Topics are found by message type and by the names OpenNI and RealSense drivers use
+(``/camera/color/image_raw``, ``/camera/rgb/image_color``, ``/camera/aligned_depth_to_color/
+image_raw``, ``/camera/depth_registered/image_raw``, ...); ``color_topic``, ``depth_topic`` and
+``info_topic`` override the choice (``depth_topic="none"`` reads colour only). Only depth that
+is registered to the colour image is picked automatically: unregistered depth would put every
+blob's depth at the wrong pixel.
+
+Depth comes out as uint16 in the camera's depth units (REP 118: 16UC1 is millimetres, 32FC1 is
+metres); a camera made from camera_info has depth_scale 0.001. Each colour frame is paired with
+the depth frame nearest in header time, if one is within half a colour frame interval
+(``sync_tolerance`` overrides). Timestamps are header stamps (the bag's receive time where a
+stamp is zero) in seconds relative to the first colour frame; ``time_origin`` is that frame's
+absolute time (s since the epoch). Messages are streamed: a few frames are buffered for pairing,
+never the recording.
+"""
+
+from __future__ import annotations
+
+import re
+import statistics
+import struct
+import warnings
+from collections import deque
+from collections.abc import Iterator
+from contextlib import closing
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import cv2
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.errors import ConfigError, InputError
+from wristtrack.hand import HandLayout
+from wristtrack.io.recording import Frame, Recording, check_depth, reject_options
+
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED = "sensor_msgs/msg/CompressedImage"
+INFO = "sensor_msgs/msg/CameraInfo"
+IMAGE_TYPES = (IMAGE, COMPRESSED)
+
+MAX_PENDING_COLOR = 16  # colour frames waiting for a later depth frame before going without
+MAX_DEPTH_BUFFER = 32  # depth frames kept as pairing candidates
+PERIOD_SAMPLE = 11  # colour stamps read at opening to estimate the frame interval
+DEFAULT_PERIOD_NS = 33_333_333  # 30 Hz, if the bag has a single colour frame
+MM = 0.001  # depth_scale of REP 118 16UC1 depth
+
+_COLOR_WORDS = {"color", "colour", "rgb"}
+_REGISTERED = ("aligned_depth_to_color", "aligned_depth_to_colour", "depth_registered")
+# Last name of an image topic -> preference (higher wins) for colour and for depth.
+_COLOR_LEAF = {"image_color": 4, "image_raw": 3, "image_rect_color": 2, "image_rect_raw": 2,
+               "image": 1}
+_DEPTH_LEAF = {"image_raw": 3, "image_rect_raw": 2, "image": 1, "image_rect": 1}
+_TRANSPORTS = ("compressed", "compresseddepth")
+_BAYER = {  # ROS encoding -> OpenCV conversion (OpenCV's older names are shifted by one pixel)
+    "bayer_rggb8": ("COLOR_BayerRGGB2BGR", "COLOR_BayerBG2BGR"),
+    "bayer_bggr8": ("COLOR_BayerBGGR2BGR", "COLOR_BayerRG2BGR"),
+    "bayer_gbrg8": ("COLOR_BayerGBRG2BGR", "COLOR_BayerGR2BGR"),
+    "bayer_grbg8": ("COLOR_BayerGRBG2BGR", "COLOR_BayerGB2BGR"),
+}
+_ENCODINGS = {  # ROS image encoding -> (dtype, channels)
+    "rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3), "8uc3": (np.uint8, 3),
+    "rgba8": (np.uint8, 4), "bgra8": (np.uint8, 4), "8uc4": (np.uint8, 4),
+    "mono8": (np.uint8, 1), "8uc1": (np.uint8, 1),
+    "mono16": (np.uint16, 1), "16uc1": (np.uint16, 1), "32fc1": (np.float32, 1),
+    **{name: (np.uint8, 1) for name in _BAYER},
+}
+
+
+def _rosbags() -> Any:
+    """The rosbags modules, or an InputError saying how to install them."""
+    try:
+        from rosbags import highlevel, typesys
+    except ImportError:
+        raise InputError(
+            "reading ROS bags needs the rosbags package: install wristtrack[ros] "
+            "(pip install 'wristtrack[ros]')"
+        ) from None
+    return highlevel, typesys
+
+
+class _Msg(NamedTuple):
+    stamp: int  # ns
+    msgtype: str
+    msg: Any
+
+
+# ------------------------------------------------------------------------------ topic choice
+
+
+def _tokens(topic: str) -> set[str]:
+    return set(re.split(r"[/_]+", topic.lower())) - {""}
+
+
+def _strip_transport(topic: str) -> str:
+    head, _, leaf = topic.rpartition("/")
+    return head if leaf.lower() in _TRANSPORTS else topic
+
+
+def _namespace(topic: str) -> str:
+    return _strip_transport(topic).rpartition("/")[0]
+
+
+def _root(topic: str) -> str:
+    return topic.strip("/").split("/")[0]
+
+
+def _is_not_colour(topic: str) -> bool:
+    tokens = _tokens(topic)
+    return bool(
+        tokens & {"depth", "ir", "disparity", "confidence", "mask"}
+        or any(t.startswith("infra") for t in tokens)
+    )
+
+
+def _colour_score(topic: str, msgtype: str) -> float | None:
+    if _is_not_colour(topic):
+        return None
+    score = 10.0 if _tokens(topic) & _COLOR_WORDS else 0.0
+    base = _strip_transport(topic)
+    score += _COLOR_LEAF.get(base.rpartition("/")[2].lower(), 0)
+    return score - (0.5 if msgtype == COMPRESSED else 0.0)
+
+
+def _is_registered(topic: str) -> bool:
+    low = topic.lower()
+    return any(word in low for word in _REGISTERED) or "registered" in _tokens(topic)
+
+
+def _depth_score(topic: str, msgtype: str, colour: str) -> float | None:
+    if "depth" not in topic.lower() or not _is_registered(topic):
+        return None
+    score = 5.0 if _root(topic) == _root(colour) else 0.0
+    base = _strip_transport(topic)
+    score += _DEPTH_LEAF.get(base.rpartition("/")[2].lower(), 0)
+    return score - (0.5 if msgtype == COMPRESSED else 0.0)
+
+
+def _info_score(topic: str, colour: str) -> float | None:
+    # camera_info of the colour camera, or of depth registered to it (same intrinsics).
+    if _namespace(topic) == _namespace(colour):
+        return 20.0
+    if _is_registered(topic) or (_tokens(topic) & _COLOR_WORDS and not _is_not_colour(topic)):
+        return 10.0 + (5.0 if _root(topic) == _root(colour) else 0.0)
+    return None
+
+
+def _best(scores: dict[str, float], what: str, option: str, where: str) -> str:
+    top = max(scores.values())
+    winners = sorted(t for t, s in scores.items() if s == top)
+    if len(winners) > 1:
+        raise InputError(
+            f"{where}: several {what} topics fit ({', '.join(winners)}); choose one with "
+            f"{option}=TOPIC"
+        )
+    return winners[0]
+
+
+# ---------------------------------------------------------------------------- message decoding
+
+
+def _stamp_ns(msg: Any, log_time: int) -> int:
+    stamp = msg.header.stamp
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return ns if ns > 0 else int(log_time)
+
+
+def _raw_array(msg: Any, where: str) -> tuple[str, np.ndarray]:
+    """(encoding, array (H,W) or (H,W,C)) of a sensor_msgs/Image, honouring step and endianness."""
+    enc = str(msg.encoding).lower()
+    if enc not in _ENCODINGS:
+        raise InputError(
+            f"{where}: image encoding {msg.encoding!r} is not supported; supported: "
+            f"{', '.join(sorted(_ENCODINGS))}"
+        )
+    dtype, channels = _ENCODINGS[enc]
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    row = w * channels * np.dtype(dtype).itemsize
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if h == 0 or w == 0 or step < row or data.size < h * step:
+        raise InputError(
+            f"{where}: image message is inconsistent ({w}x{h}, step {step}, {data.size} bytes); "
+            "the bag is damaged"
+        )
+    rows = np.ascontiguousarray(data[: h * step].reshape(h, step)[:, :row])
+    order = ">" if msg.is_bigendian else "<"
+    array = rows.view(np.dtype(dtype).newbyteorder(order)).astype(dtype, copy=False)
+    return enc, array.reshape((h, w) if channels == 1 else (h, w, channels))
+
+
+def decode_colour(m: _Msg, where: str) -> np.ndarray:
+    """BGR uint8 (H,W,3) of an Image (rgb8, bgr8, mono8, rgba8, bgra8, bayer) or CompressedImage."""
+    if m.msgtype == COMPRESSED:
+        image = cv2.imdecode(np.asarray(m.msg.data, dtype=np.uint8), cv2.IMREAD_COLOR)
+        if image is None:
+            raise InputError(f"{where}: compressed image ({m.msg.format}) cannot be decoded")
+        return image
+    enc, image = _raw_array(m.msg, where)
+    if image.dtype != np.uint8:
+        raise InputError(
+            f"{where} has {m.msg.encoding} images; colour must be rgb8, bgr8 or mono8 (is this "
+            "the depth topic? set color_topic=)"
+        )
+    if enc in ("rgb8",):
+        return cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    if enc in ("rgba8",):
+        return cv2.cvtColor(image, cv2.COLOR_RGBA2BGR)
+    if enc in ("bgra8", "8uc4"):
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    if enc in _BAYER:
+        new, old = _BAYER[enc]
+        return cv2.cvtColor(image, getattr(cv2, new, None) or getattr(cv2, old))
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    return image.copy()  # bgr8 / 8UC3; copy: the message buffer is read-only
+
+
+def _depth_units(metres: np.ndarray, depth_scale: float) -> np.ndarray:
+    """Float metres -> uint16 raw units; NaN, inf, <= 0 and out-of-range become 0 (no reading)."""
+    with np.errstate(invalid="ignore"):
+        units = np.rint(metres / depth_scale)
+        valid = np.isfinite(units) & (units > 0) & (units <= np.iinfo(np.uint16).max)
+    return np.where(valid, units, 0).astype(np.uint16)
+
+
+def decode_depth(m: _Msg, depth_scale: float, where: str) -> np.ndarray:
+    """Raw uint16 depth (H,W) in units of ``depth_scale`` metres from 16UC1 (mm) or 32FC1 (m)."""
+    if m.msgtype == COMPRESSED:
+        return _decode_compressed_depth(m.msg, depth_scale, where)
+    enc, image = _raw_array(m.msg, where)
+    if enc in ("16uc1", "mono16"):
+        if depth_scale == MM:
+            return image.copy()
+        return _depth_units(image * MM, depth_scale)
+    if enc == "32fc1":
+        return _depth_units(image.astype(np.float64), depth_scale)
+    raise InputError(
+        f"{where} has {m.msg.encoding} images; depth must be 16UC1 (mm) or 32FC1 (m) (is this "
+        "the colour topic? set depth_topic=)"
+    )
+
+
+def _decode_compressed_depth(msg: Any, depth_scale: float, where: str) -> np.ndarray:
+    """image_transport compressedDepth: a 12-byte header (format, quantisation) then a PNG."""
+    data = bytes(msg.data)
+    fmt = str(msg.format).lower()
+    start = data.find(b"\x89PNG")
+    image = None
+    if start >= 0 and "compresseddepth" in fmt:
+        image = cv2.imdecode(np.frombuffer(data[start:], np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None or image.dtype != np.uint16 or image.ndim != 2:
+        raise InputError(
+            f"{where}: compressed depth ({msg.format}) cannot be decoded; only "
+            "compressedDepth PNG is supported, or use the raw depth topic"
+        )
+    if fmt.startswith("32fc1"):
+        # Stored as quantised inverse depth: z = a / (v - b), v = 0 meaning no reading.
+        _, a, b = struct.unpack("<iff", data[:12])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            metres = np.where(image > 0, a / (image.astype(np.float64) - b), np.nan)
+        return _depth_units(metres, depth_scale)
+    return image if depth_scale == MM else _depth_units(image * MM, depth_scale)
+
+
+def camera_from_info(msg: Any, where: str) -> Camera:
+    """Camera (K, plumb_bob/rational_polynomial D, size; depth_scale 0.001) of a CameraInfo."""
+    k = np.asarray(msg.k if hasattr(msg, "k") else msg.K, dtype=np.float64)
+    d = np.asarray(msg.d if hasattr(msg, "d") else msg.D, dtype=np.float64)
+    model = str(msg.distortion_model).lower()
+    if d.size and np.any(d != 0) and model not in ("plumb_bob", "rational_polynomial"):
+        raise ConfigError(
+            f"{where}: distortion model {msg.distortion_model!r} is not supported (plumb_bob or "
+            "rational_polynomial); use rectified images or pass --camera camera.json"
+        )
+    try:
+        return Camera(
+            fx=float(k[0]), fy=float(k[4]), cx=float(k[2]), cy=float(k[5]),
+            width=int(msg.width), height=int(msg.height), depth_scale=MM,
+            dist=tuple(float(c) for c in d) if d.size else None,
+        )
+    except (ConfigError, IndexError) as e:
+        raise ConfigError(
+            f"{where}: not a usable calibration ({e}); calibrate the camera or pass --camera "
+            "camera.json"
+        ) from None
+
+
+# ------------------------------------------------------------------------------ the recording
+
+
+class BagRecording(Recording):
+    """Colour (+ registered depth) frames of a ROS 1 .bag or a ROS 2 bag folder."""
+
+    kind = "ROS bag"
+
+    def __init__(
+        self,
+        path: str | Path,
+        camera: Camera | None = None,
+        hand: HandLayout | None = None,
+        *,
+        color_topic: str | None = None,
+        depth_topic: str | None = None,
+        info_topic: str | None = None,
+        sync_tolerance: float | None = None,
+        **unknown: object,
+    ) -> None:
+        path = Path(path)
+        reject_options("the ROS bag", path, unknown)
+        self.path = path
+        self.where = f"ROS bag {path}"
+        if not path.exists():
+            raise InputError(f"{self.where} not found; give a .bag file or a ROS 2 bag folder")
+        with self._reader() as reader:
+            topics = {name: info.msgtype for name, info in reader.topics.items()}
+            counts = {name: info.msgcount for name, info in reader.topics.items()}
+            self.color_topic = self._choose_colour(topics, color_topic)
+            self.depth_topic = self._choose_depth(topics, depth_topic)
+            if camera is None:
+                info = self._choose_info(topics, info_topic)
+                camera = camera_from_info(
+                    self._first(reader, info).msg, f"{self.where} topic {info}"
+                )
+                self.info_topic: str | None = info
+            else:
+                self.info_topic = None
+            super().__init__(str(path), camera, hand)
+            self._length = counts[self.color_topic]
+            if self._length == 0:
+                raise InputError(
+                    f"{self.where}: topic {self.color_topic} has no messages; the recording is "
+                    "empty"
+                )
+            stamps = self._colour_stamps(reader)
+        self.time_origin = stamps[0] / 1e9
+        self._t0 = stamps[0]
+        diffs = [b - a for a, b in zip(stamps, stamps[1:], strict=False) if b > a]
+        period = statistics.median(diffs) if diffs else DEFAULT_PERIOD_NS
+        self.sync_tolerance = sync_tolerance if sync_tolerance is not None else period / 2e9
+        self.has_depth = self.depth_topic is not None
+
+    # ------------------------------------------------------------------------------ opening
+
+    def _reader(self) -> Any:
+        highlevel, typesys = _rosbags()
+        try:
+            try:
+                # Bags written by ROS 2 before Iron carry no message definitions: assume the
+                # standard ones (older rosbags releases have no default_typestore).
+                typestore = typesys.get_typestore(typesys.Stores.ROS2_HUMBLE)
+                reader = highlevel.AnyReader([self.path], default_typestore=typestore)
+            except (AttributeError, TypeError):
+                reader = highlevel.AnyReader([self.path])
+            reader.open()
+        except Exception as e:  # rosbags raises several types for damaged or foreign files
+            raise InputError(
+                f"{self.where} cannot be read ({e}); give a complete ROS 1 .bag (rosbag reindex "
+                "an interrupted one) or a ROS 2 bag folder"
+            ) from None
+        return closing(reader)
+
+    def _list(self, topics: dict[str, str]) -> str:
+        listing = ", ".join(f"{name} ({kind})" for name, kind in sorted(topics.items()))
+        return listing or "none"
+
+    def _given(self, topics: dict[str, str], topic: str, types: tuple[str, ...], option: str):
+        if topic not in topics:
+            raise InputError(
+                f"{self.where} has no topic {topic!r} ({option}); its topics: "
+                f"{self._list(topics)}"
+            )
+        if topics[topic] not in types:
+            raise InputError(
+                f"{self.where}: topic {topic} is {topics[topic]}, not {' or '.join(types)}; "
+                f"fix {option}"
+            )
+        return topic
+
+    def _choose_colour(self, topics: dict[str, str], given: str | None) -> str:
+        if given:
+            return self._given(topics, given, IMAGE_TYPES, "color_topic")
+        scores = {t: _colour_score(t, k) for t, k in topics.items() if k in IMAGE_TYPES}
+        scores = {t: s for t, s in scores.items() if s is not None}
+        if not scores:
+            raise InputError(
+                f"{self.where} has no colour image topic (sensor_msgs/Image or CompressedImage); "
+                f"its topics: {self._list(topics)}; set color_topic= if one is the colour camera"
+            )
+        return _best(scores, "colour image", "color_topic", self.where)
+
+    def _choose_depth(self, topics: dict[str, str], given: str | None) -> str | None:
+        if given and given.lower() == "none":
+            return None
+        if given:
+            return self._given(topics, given, IMAGE_TYPES, "depth_topic")
+        images = [t for t, k in topics.items() if k in IMAGE_TYPES and t != self.color_topic]
+        scores = {t: _depth_score(t, topics[t], self.color_topic) for t in images}
+        scores = {t: s for t, s in scores.items() if s is not None}
+        if not scores:
+            unregistered = [t for t in images if "depth" in t.lower()]
+            if unregistered:
+                warnings.warn(
+                    f"{self.where}: no registered depth topic; ignoring {', '.join(unregistered)} "
+                    "(not aligned to colour). Set depth_topic= if it is registered.",
+                    stacklevel=3,
+                )
+            return None
+        return _best(scores, "registered depth", "depth_topic", self.where)
+
+    def _choose_info(self, topics: dict[str, str], given: str | None) -> str:
+        if given:
+            return self._given(topics, given, (INFO,), "info_topic")
+        scores = {t: _info_score(t, self.color_topic) for t, k in topics.items() if k == INFO}
+        scores = {t: s for t, s in scores.items() if s is not None}
+        if not scores:
+            raise ConfigError(
+                f"{self.where} has no sensor_msgs/CameraInfo topic for {self.color_topic}; its "
+                f"topics: {self._list(topics)}; pass --camera camera.json (or info_topic=)"
+            )
+        return _best(scores, "camera_info", "info_topic", self.where)
+
+    def _connections(self, reader: Any, topic: str) -> list[Any]:
+        return [c for c in reader.connections if c.topic == topic]
+
+    def _messages(self, reader: Any, topics: list[str]) -> Iterator[tuple[str, _Msg]]:
+        conns = [c for topic in topics for c in self._connections(reader, topic)]
+        with closing(reader.messages(connections=conns)) as messages:
+            for conn, log_time, raw in messages:
+                try:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                except Exception as e:
+                    raise InputError(
+                        f"{self.where}: a message on {conn.topic} cannot be decoded ({e}); the "
+                        "bag is damaged"
+                    ) from None
+                stamp = _stamp_ns(msg, log_time) if hasattr(msg, "header") else int(log_time)
+                yield conn.topic, _Msg(stamp, conn.msgtype, msg)
+
+    def _first(self, reader: Any, topic: str) -> _Msg:
+        with closing(self._messages(reader, [topic])) as messages:
+            for _, m in messages:
+                return m
+        raise ConfigError(
+            f"{self.where}: topic {topic} has no messages; pass --camera camera.json"
+        )
+
+    def _colour_stamps(self, reader: Any) -> list[int]:
+        """Stamps of the first few colour frames; the first one is decoded to check its size."""
+        stamps: list[int] = []
+        with closing(self._messages(reader, [self.color_topic])) as messages:
+            for _, m in messages:
+                if not stamps:
+                    where = f"{self.where} topic {self.color_topic}"
+                    self.check_size(decode_colour(m, where), where)
+                stamps.append(m.stamp)
+                if len(stamps) >= PERIOD_SAMPLE:
+                    break
+        return stamps
+
+    def __len__(self) -> int:
+        return self._length
+
+    # ------------------------------------------------------------------------------ frames
+
+    def _frames(self) -> Iterator[Frame]:
+        tol = round(self.sync_tolerance * 1e9)
+        topics = [self.color_topic] + ([self.depth_topic] if self.depth_topic else [])
+        pending: deque[_Msg] = deque()  # colour frames waiting for their depth
+        depths: deque[_Msg] = deque()  # depth candidates
+        newest_depth: int | None = None
+        last_colour: int | None = None
+        index = 0
+        with self._reader() as reader, closing(self._messages(reader, topics)) as messages:
+            for topic, m in messages:
+                if topic == self.color_topic:
+                    pending.append(m)
+                else:
+                    depths.append(m)
+                    newest_depth = m.stamp if newest_depth is None else max(newest_depth, m.stamp)
+                # A colour frame is complete once depth has moved past its window (depth stamps
+                # increase), or when depth stalls (dropped, or the stream has ended).
+                while pending and (
+                    self.depth_topic is None
+                    or (newest_depth is not None and newest_depth > pending[0].stamp + tol)
+                    or len(pending) > MAX_PENDING_COLOR
+                ):
+                    c = pending.popleft()
+                    last_colour = c.stamp
+                    yield self._frame(index, c, depths, tol)
+                    index += 1
+                reference = pending[0].stamp if pending else last_colour
+                while depths and (
+                    len(depths) > MAX_DEPTH_BUFFER
+                    or (reference is not None and depths[0].stamp < reference - tol)
+                ):
+                    depths.popleft()
+            while pending:
+                yield self._frame(index, pending.popleft(), depths, tol)
+                index += 1
+
+    def _frame(self, index: int, c: _Msg, depths: deque[_Msg], tol: int) -> Frame:
+        where = f"{self.where} topic {self.color_topic} frame {index}"
+        bgr = decode_colour(c, where)
+        self.check_size(bgr, where)
+        depth = None
+        if depths:
+            best = min(depths, key=lambda d: abs(d.stamp - c.stamp))
+            if abs(best.stamp - c.stamp) <= tol:
+                where = f"{self.where} topic {self.depth_topic} (for frame {index})"
+                depth = check_depth(decode_depth(best, self.camera.depth_scale, where), bgr, where)
+        return Frame(index, (c.stamp - self._t0) / 1e9, bgr, depth)
