@@ -40,6 +40,7 @@ __all__ = ["RENDER_SCENARIOS", "RenderedFrame", "render_frames", "render_recordi
 
 MARKER_RADIUS = 0.006  # 12 mm discs
 DEPTH_SIGMA_COEFF = 1.425e-3  # Kinect-like depth noise: sigma = coeff * z^2 (m)
+DEPTH_NOISE_CORRELATION_PX = 3.0  # Gaussian correlation length of the depth noise (pixels)
 TABLE_GAP = 0.13  # table this far below the back of the neutral hand (m): room for flexion
 
 # Surface ids in the id buffer. Markers are visible only where the back of the palm is in front.
@@ -382,6 +383,12 @@ class _Renderer:
         pad = (H + _NOISE_PAD, W + _NOISE_PAD)
         self.noise_bank = self.rng.standard_normal((2, *pad, 3), dtype=np.float32)
         self.depth_bank = self.rng.standard_normal((2, *pad), dtype=np.float32)
+        # A structured-light sensor matches windows of several pixels, so its depth noise is
+        # correlated over a few pixels: averaging a blob's pixels cannot beat it down as iid
+        # noise would (Khoshelham & Elberink 2012). Blur the bank, then restore unit variance.
+        for b in range(2):
+            smooth = cv2.GaussianBlur(self.depth_bank[b], (0, 0), DEPTH_NOISE_CORRELATION_PX)
+            self.depth_bank[b] = smooth / smooth.std()
         self.phases = self.rng.uniform(0, 2 * np.pi, 5)
         self._static_sensor()
 
