@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/wristtrack demo
+	$(VENV)/bin/wristtrack demo --out demo_out
 
 test: $(STAMP)
 	$(PY) -m pytest

@@ -1,25 +1,33 @@
-"""The command line: the demo prints real errors; bad arguments give one line and exit != 0."""
+"""The command line: the demo runs the main job end to end; bad arguments give one line."""
 
+import json
 import subprocess
 import sys
 
 from wristtrack.cli import main
 
 
-def test_demo_prints_errors_for_a_scenario(capsys):
-    assert main(["demo", "--scenario", "deviation"]) == 0
+def test_demo_renders_tracks_and_scores_the_default_recording(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--no-progress"]) == 0
     out = capsys.readouterr().out
-    row = next(line for line in out.splitlines() if line.startswith("deviation"))
-    pos, rot = (float(v) for v in row.split()[2:4])
-    assert 0 < pos < 3.0 and 0 < rot < 1.5
+    assert "orientation RMSE" in out and "outputs:" in out
+    runs = list(tmp_path.glob("run-*"))
+    assert len(runs) == 1
+    result = json.loads((runs[0] / "evaluation.json").read_text())
+    assert result["orientation_rmse_deg"] < 2.0 and result["position_rmse_mm"] < 5.0
+    assert abs(result["peak_speed_error_pct"]) < 5.0  # the reach's peak speed
+    # a second run reuses the rendered recording
+    assert main(["demo", "--out", str(tmp_path), "--no-progress"]) == 0
+    assert "rendering" not in capsys.readouterr().out
 
 
-def test_unknown_scenario_is_one_line_without_traceback():
+def test_unknown_scenario_is_one_line_without_traceback(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-m", "wristtrack.cli", "demo", "--scenario", "nope"],
+        [sys.executable, "-m", "wristtrack.cli", "simulate", str(tmp_path / "x"), "--scenario",
+         "nope"],
         capture_output=True, text=True, check=False,
     )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "unknown scenario 'nope'" in lines[0]
+    assert len(lines) == 1 and "nope" in lines[0]

@@ -33,6 +33,8 @@ def evaluate(poses_csv: str | Path, truth_csv: str | Path) -> dict[str, Any]:
     """Errors of a run against truth: pose RMSE and 95th percentiles, failure rate, coverage,
     range-of-motion error per anatomical axis and peak-speed error."""
     est, truth = read_poses(poses_csv), read_poses(truth_csv)
+    if len(est["timestamp"]) == 0:
+        raise InputError(f"{poses_csv} has no rows: did the run stop before its first frame?")
     idx = match_rows(est, truth)
     if (idx < 0).all():
         raise InputError(
