@@ -8,6 +8,7 @@ alongside, since absolute times on shared machines are noisy.
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import time
 from dataclasses import dataclass
@@ -147,30 +148,47 @@ def accuracy_table(seeds: tuple[int, ...] = (0,)) -> list[str]:
     return lines
 
 
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/BENCHMARKS.md"))
     parser.add_argument("--seeds", type=int, default=3, help="Monte Carlo seeds per scenario")
+    parser.add_argument("--no-soak", action="store_true", help="skip the 20,000-frame soak")
     args = parser.parse_args(argv)
+
+    import filterpy
+
+    from wristtrack.bench_pipeline import pipeline_sections
 
     step = time_tracker_step()
     seeds = tuple(range(args.seeds))
     table = accuracy_table(seeds)
-    import filterpy
-
     ratio = (
         f"{step.filterpy_ms / step.ours_ms:.1f}x faster than FilterPy"
         if step.filterpy_ms
         else "FilterPy not installed"
     )
+    command = f"python -m wristtrack.bench --seeds {args.seeds}"
+    if args.no_soak:
+        command += " --no-soak"
     text = [
         "# Benchmarks",
         "",
-        f"Written by `make bench` (`python -m wristtrack.bench --seeds {args.seeds}`), "
-        f"wristtrack {__version__}.",
-        f"Machine: {platform.machine()}, {platform.processor() or 'unknown CPU'}, "
-        f"Python {platform.python_version()}, NumPy {np.__version__}, SciPy {scipy.__version__}, "
-        f"FilterPy {filterpy.__version__}; {platform.platform()}.",
+        f"Written by `make bench` (`{command}`), wristtrack {__version__}, on "
+        f"{time.strftime('%Y-%m-%d')}.",
+        f"Machine: {_cpu()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        f"NumPy {np.__version__}, SciPy {scipy.__version__}, FilterPy {filterpy.__version__}; "
+        f"{platform.platform()}. Shared machine: compare ratios measured in the same run, not "
+        "absolute times.",
         "",
         "## Tracker step",
         "",
@@ -195,6 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         *table,
         "",
+        *pipeline_sections(soak=not args.no_soak),
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(text))
