@@ -4,10 +4,15 @@ A small state machine: ``initialising`` until the least-squares initialisation s
 ``tracking`` (``coasting`` for a frame where no marker could be associated), ``lost`` after too
 many frames with too few markers, from where it re-initialises by itself by fitting the layout.
 The fixed frame W0 is the hand frame of the first initialisation and never moves afterwards.
+
+A tracking frame of the default configuration takes a fast path (_FastStep) that computes the
+same filter in far fewer NumPy calls; every other configuration and every unusual frame takes
+the generic path (Tracker._generic_frame), which is the reference.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
@@ -21,7 +26,16 @@ from wristtrack.geometry import so3_log
 from wristtrack.hand import HandLayout
 from wristtrack.initialise import initialise
 from wristtrack.measurements import Detections
-from wristtrack.motion import MODELS, ProcessNoise
+from wristtrack.motion import (
+    MODELS,
+    ConstantRateModel,
+    ProcessNoise,
+    quat_exp,
+    quat_mul,
+    quat_normalised,
+    quat_of_matrix,
+    quat_to_matrix,
+)
 from wristtrack.observation import MarkerObservation, MeasurementNoise
 
 
@@ -114,6 +128,7 @@ class Tracker:
         self.t_c0: np.ndarray | None = None
         self._track: _Track | None = None
         self._obs: dict[bool, MarkerObservation] = {}
+        self._fast: _FastStep | bool | None = None  # built on first use (W0 must be fixed)
         self._frame = -1
         self._last_timestamp = -np.inf
         self.status = Status.INITIALISING
@@ -176,8 +191,48 @@ class Tracker:
         return self._obs[use_depth]
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
-        cfg, model = self.config, self.model
+        cfg = self.config
         dt = det.timestamp - track.timestamp
+        fast = self._fast_step(det)
+        out = fast.step(det, track.x, track.P, dt) if fast is not None else None
+        if out is None:
+            out = self._generic_frame(det, track, dt)
+        x, P, labels, n_assoc, nis, dof = out
+        if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
+            self._lose()
+            return self._empty(det, Status.LOST)
+        track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
+        if track.weak_frames > cfg.lost_after:
+            self._lose()
+            return self._empty(det, Status.LOST)
+        track.x, track.P, track.timestamp = x, P, det.timestamp
+        status = Status.TRACKING if n_assoc else Status.COASTING
+        self.status = status
+        one_to_one = cfg.association == "gnn"  # then the blobs not taken are the clutter
+        n_clutter = len(labels) - n_assoc if one_to_one else int(np.sum(labels < 0))
+        return self._result(det, status, labels, n_assoc, nis, dof, dt, n_clutter)
+
+    def _fast_step(self, det: Detections) -> _FastStep | None:
+        """The fast path where this configuration and frame allow it (see _FastStep)."""
+        if self._fast is None:
+            cfg = self.config
+            obs = self._observation(True)
+            usable = (
+                type(self.model) is ConstantRateModel
+                and cfg.association == "gnn"
+                and cfg.use_depth
+                and obs.has_column_path
+            )
+            self._fast = _FastStep(self.model, obs, cfg, self.assoc_params) if usable else False
+        if not self._fast or det.depth is None or det.count == 0:
+            return None
+        if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
+            return None
+        return self._fast
+
+    def _generic_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
+        """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)."""
+        cfg, model = self.config, self.model
         use_depth = cfg.use_depth and det.depth is not None
         obs = self._observation(use_depth)
         k = obs.k
@@ -215,17 +270,7 @@ class Tracker:
                 x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
         n_assoc = int(np.unique(labels[labels >= 0]).size)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
-            self._lose()  # never let a numerical failure leak out as an estimate
-            return self._empty(det, Status.LOST)
-        track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
-        if track.weak_frames > cfg.lost_after:
-            self._lose()
-            return self._empty(det, Status.LOST)
-        track.x, track.P, track.timestamp = x, P, det.timestamp
-        status = Status.TRACKING if n_assoc else Status.COASTING
-        self.status = status
-        return self._result(det, status, labels, n_assoc, nis, dof, dt)
+        return x, P, labels, n_assoc, nis, dof
 
     def _expected_markers(self, x: np.ndarray, obs: MarkerObservation) -> np.ndarray:
         """Markers that can be seen at the predicted pose: in the image, palm not turned away."""
@@ -255,25 +300,41 @@ class Tracker:
 
     # -------------------------------------------------------------------------------- output
 
-    def _result(self, det, status, labels, n_assoc, nis, dof, dt=None) -> FrameResult:
+    def _result(
+        self, det, status, labels, n_assoc, nis, dof, dt=None, n_clutter=None
+    ) -> FrameResult:
         track = self._track
         R_rel, p = self.model.pose(track.x[None])
         R_rel, p = R_rel[0], p[0]
         v, w = self.model.velocities(track.x)
-        if np.isnan(w).all():  # the paper's state has no rate: differentiate the orientation
+        if math.isnan(w[0]):  # the paper's state has no rate (all NaN): differentiate R
             w = (
                 so3_log(R_rel @ track.R_prev.T) / dt
                 if dt and track.R_prev is not None
                 else np.zeros(3)
             )
         track.R_prev = R_rel
-        R_ch = self.R_c0 @ R_rel
-        t_ch = self.R_c0 @ p + self.t_c0
-        n_clutter = int(np.sum(labels < 0))
+        R_ch = self.R_c0.dot(R_rel)
+        t_ch = self.R_c0.dot(p) + self.t_c0
+        if n_clutter is None:
+            n_clutter = int(np.sum(labels < 0))
         return FrameResult(
             self._frame, det.timestamp, status, R_ch, t_ch, R_rel, p, v.copy(), w, track.P.copy(),
             labels, n_assoc, n_clutter, nis, dof,
         )
+
+
+_ONES = np.ones(256)
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """np.isfinite(a).all() in one cheap call: a NaN or an inf anywhere makes the sum non-finite
+    (finite entries could only overflow it beyond 1e308). The sum is a dot product with ones,
+    which costs a fraction of a NumPy reduction's call overhead."""
+    flat = a.ravel()
+    if flat.size > _ONES.size:
+        return bool(np.isfinite(flat).all())
+    return math.isfinite(flat.dot(_ONES[: flat.size]))
 
 
 def _diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
@@ -295,3 +356,103 @@ def _stack_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, 
     values = z[blobs]
     ok = np.isfinite(values)
     return rows[ok], values[ok]
+
+
+class _FastStep:
+    """One tracking frame of the default configuration in a few dozen whole-array operations.
+
+    The same filter as ``Tracker._generic_frame`` (augmented UKF prediction with measurement,
+    one-to-one association, Cholesky update), arranged for speed: a frame's arrays are so small
+    that the cost is the number of NumPy calls and Python statements, not arithmetic. The 37
+    sigma points are columns of one buffer (see SigmaColumns); the model writes its propagated
+    points and lifts straight into it (SigmaPropagator), the observation its measurements, and
+    one matrix product gives the joint covariance of measurements and state. The orientation
+    is a quaternion, single poses are Python floats. Used for the constant-rate model with GNN
+    association and depth on an undistorted camera, for frames whose blobs all have depth and
+    whose markers are all expected in view; anything else goes the generic way (``step``
+    returns None before changing anything).
+
+    Rows of the sigma buffer (m = 3 x markers), the model's rows below the measurements:
+      [0, m)         measurements, axis-major (u of each marker, then v, then z)
+      [m, m+12)      tangent lifts (dphi, dp, dv, dw); with the measurements, the UT's input
+      [m, m+46)      SigmaPropagator's rows, among them the measurement features
+    """
+
+    def __init__(
+        self,
+        model: ConstantRateModel,
+        obs: MarkerObservation,
+        config: TrackerConfig,
+        assoc_params: assoc.AssociationParams,
+    ):
+        self.obs, self.facing_cos = obs, config.facing_cos
+        self.n_markers = n = obs.n_markers
+        self.m = m = 3 * n
+        self.dim = d = model.dim
+        self.sigma = ukf.SigmaColumns(d, model.noise_dim, config.ukf)
+        self.propagator = prop = model.sigma_propagator()
+        self.gate = assoc.BlockGate(n, assoc_params)
+        rows = np.zeros((m + prop.ROWS, self.sigma.offsets.shape[1]))
+        self._measured, self._ut_rows, self._model_rows = rows[:m], rows[: m + d], rows[m:]
+        self._features = rows[m:][prop.FEATURES]
+        self._centre_pvw = self._features[1:10, 0]  # the propagated centre's p, v, w
+        self._cov = np.empty((m + d, m + d + 1))  # joint covariance, last column free
+        self._noise = self._cov.reshape(-1)[: m * (m + d + 2) : m + d + 2]  # measured diagonal
+
+    def step(self, det: Detections, x: np.ndarray, P: np.ndarray, dt: float) -> tuple | None:
+        """(x, P, labels, markers associated, NIS, its dof) as _generic_frame, or None."""
+        m, n, d, C, obs = self.m, self.n_markers, self.dim, self._cov, self.obs
+        # predict: sigma points through the motion and the measurement, one set for both
+        q_state = quat_of_matrix(x[:9].tolist())
+        self.sigma.set_covariance(P)
+        q_centre = self.propagator.propagate(
+            x, self.sigma.offsets, dt, q_state, self._model_rows
+        )
+        obs.measure_columns(self._features, self._measured)
+        means = self.sigma.moments(self._ut_rows, C)
+        y = means.tolist()
+        # the predicted state: the mean lift retracted about the propagated centre
+        q = quat_mul(quat_exp(*y[m : m + 3]), quat_mul(q_centre, q_state))
+        pvw = self._centre_pvw + means[m + 3 :]
+        if not obs.all_visible(quat_to_matrix(q), pvw[:3].tolist(), self.facing_cos):
+            return None
+        self._noise += obs.noise_variances(y)  # C's measurement block is now Pyy + R
+
+        # associate
+        D = self._differences(det, means)
+        found = self.gate.distances(C[:m, :m], D)
+        if found is None:
+            return None
+        pairs = self.gate.assign(*found)
+
+        # update with the associated markers' pixels and depths
+        M = D.shape[1]
+        labels = [assoc.CLUTTER] * M
+        if not pairs:
+            x = np.array(quat_to_matrix(quat_normalised(q)) + pvw.tolist())
+            return x, ukf.symmetrise(C[m:, m : m + d]), np.array(labels), 0, np.nan, 0
+        for j, b in pairs:
+            labels[b] = j
+        rows = [j + n * a for a in range(3) for j, _ in pairs]  # (axis, marker), axis-major
+        # z_b - y_j of each associated pair: D's column-major storage is D.T, C-contiguous
+        innovation = D.T.take([b * m + r for r, (_, b) in zip(rows, pairs * 3, strict=True)])
+        if len(pairs) == n:  # all markers, in order
+            rows = None
+            C[:m, -1] = innovation
+        else:
+            C[rows, -1] = innovation
+        dx, P, nis = ukf.joint_correct(C, m, rows)
+        q = quat_normalised(quat_mul(quat_exp(*dx[:3].tolist()), q))
+        pvw += dx[3:]
+        x = np.array(quat_to_matrix(q) + pvw.tolist())
+        return x, P, np.array(labels), len(pairs), nis, 3 * len(pairs)
+
+    def _differences(self, det: Detections, means: np.ndarray) -> np.ndarray:
+        """z_i - y_j for every blob i and measurement row j: (m, M) in the measurement's rows,
+        stored column-major (blob-major), the layout the triangular solve works in."""
+        n, M = self.n_markers, det.count
+        Dt = np.empty((M, self.m))
+        uv = Dt[:, : 2 * n].reshape(M, 2, n)
+        np.subtract(det.uv[:, :, None], means[: 2 * n].reshape(2, n), out=uv)
+        np.subtract(det.depth[:, None], means[2 * n : self.m], out=Dt[:, 2 * n :])
+        return Dt.T
