@@ -105,3 +105,19 @@ def test_read_poses_refuses_a_file_that_is_not_poses(tmp_path):
         read_poses(bad)
     with pytest.raises(InputError, match="cannot read"):
         read_poses(tmp_path / "missing.csv")
+
+
+def test_reported_uncertainty_matches_the_actual_errors(run_dir):
+    """pos_sigma_mm / rot_sigma_deg are root-trace 1-sigma values: the errors' RMS over the run
+    should be of the same size (a consistent filter), not 10x off either way."""
+    out, run = run_dir
+    cols = read_poses(out / "poses.csv")
+    tracking = cols["status"] == "tracking"
+    R, t = rows_to_poses(cols)
+    pos_err = np.linalg.norm(t[tracking] - run.truth.t_ch[tracking], axis=1) * 1e3
+    ratio = np.sqrt(np.mean(pos_err**2) / np.mean(cols["pos_sigma_mm"][tracking] ** 2))
+    assert 0.4 < ratio < 2.5, ratio
+    rel = np.einsum("nji,njk->nik", R[tracking], run.truth.R_ch[tracking])
+    rot_err = np.degrees(Rotation.from_matrix(rel).magnitude())
+    ratio = np.sqrt(np.mean(rot_err**2) / np.mean(cols["rot_sigma_deg"][tracking] ** 2))
+    assert 0.4 < ratio < 2.5, ratio

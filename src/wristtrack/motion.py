@@ -54,6 +54,8 @@ class ConstantRateModel:
     """
 
     dim = 12
+    rotation = slice(0, 3)  # tangent coordinates of the orientation error (rad)
+    position = slice(3, 6)  # and of the position (m)
     noise_dim = 6
     name = "default"
 
@@ -130,6 +132,8 @@ class PaperModel:
     """
 
     dim = 9
+    rotation = slice(6, 9)  # Euler angles: an approximation of the orientation error (rad)
+    position = slice(0, 3)
     noise_dim = 6
     name = "paper"
 

@@ -94,6 +94,8 @@ class FrameResult:
     n_clutter: int  # blobs taken as clutter
     nis: float = np.nan  # normalised innovation squared of the update
     nis_dof: int = 0
+    pos_sigma_mm: float = np.nan  # 1-sigma position uncertainty (root of the variance trace)
+    rot_sigma_deg: float = np.nan  # 1-sigma orientation uncertainty
 
     @property
     def has_estimate(self) -> bool:
@@ -318,9 +320,12 @@ class Tracker:
         t_ch = self.R_c0.dot(p) + self.t_c0
         if n_clutter is None:
             n_clutter = int(np.sum(labels < 0))
+        var = track.P.diagonal()
+        rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum(), 0.0)))
+        pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum(), 0.0))
         return FrameResult(
             self._frame, det.timestamp, status, R_ch, t_ch, R_rel, p, v.copy(), w, track.P.copy(),
-            labels, n_assoc, n_clutter, nis, dof,
+            labels, n_assoc, n_clutter, nis, dof, pos_sigma, rot_sigma,
         )
 
 

@@ -42,7 +42,8 @@ def pose_row(
     w: np.ndarray,
     n_visible: int,
     n_clutter: int,
-    cov: np.ndarray | None = None,
+    pos_sigma_mm: float = math.nan,
+    rot_sigma_deg: float = math.nan,
     nis: float = math.nan,
     nis_dof: int = 0,
 ) -> list[str]:
@@ -54,17 +55,11 @@ def pose_row(
     else:
         q_cam = q_rel = np.full(4, np.nan)
         angles = np.full(3, np.nan)
-    pos_sigma = rot_sigma = math.nan
-    if cov is not None and known:
-        diag = np.diag(cov)
-        # the first six tangent coordinates are (rotation, position) in both models' order
-        rot_sigma = math.degrees(math.sqrt(max(diag[:3].sum(), 0.0)))
-        pos_sigma = 1e3 * math.sqrt(max(diag[3:6].sum(), 0.0))
     cells = [str(frame), repr(float(timestamp)), str(status)]
     numbers = (*t_ch, *q_cam, *p, *q_rel, *v, *w, *angles)
     cells += [_fmt(float(x)) for x in numbers]
     cells += [str(int(n_visible)), str(int(n_clutter))]
-    cells += [_fmt(pos_sigma), _fmt(rot_sigma), _fmt(float(nis)), str(int(nis_dof))]
+    cells += [_fmt(pos_sigma_mm), _fmt(rot_sigma_deg), _fmt(float(nis)), str(int(nis_dof))]
     return cells
 
 
@@ -90,7 +85,7 @@ class PosesWriter:
             pose_row(
                 result.frame, result.timestamp, str(result.status), result.R_ch, result.t_ch,
                 result.R, result.p, result.v, result.w, result.n_visible, result.n_clutter,
-                result.cov, result.nis, result.nis_dof,
+                result.pos_sigma_mm, result.rot_sigma_deg, result.nis, result.nis_dof,
             )
         )
 
