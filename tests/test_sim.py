@@ -221,3 +221,18 @@ def test_timestamps():
 def test_unknown_scenario_is_a_config_error():
     with pytest.raises(ConfigError, match="unknown scenario"):
         scenario("juggling")
+
+
+def test_near_clutter_lands_next_to_the_markers():
+    from wristtrack.sim.detections import NoiseModel, simulate_detections
+    from wristtrack.sim.motion import scenario
+
+    truth, camera, layout = scenario("deviation", rng=0)
+    noise = NoiseModel(clutter_mean=0.0, p_miss=0.0, near_clutter_mean=2.0, near_clutter_px=8.0)
+    frames = simulate_detections(truth, camera, layout, noise, 1)
+    n_near = np.array([(f.labels < 0).sum() for f in frames])
+    assert abs(n_near.mean() - 2.0) < 4 * np.sqrt(2.0 / len(frames))
+    for f in frames[:20]:
+        markers = f.detections.uv[f.labels >= 0]
+        for blob in f.detections.uv[f.labels < 0]:
+            assert np.linalg.norm(markers - blob, axis=1).min() < 8.0 * 6

@@ -179,3 +179,16 @@ def test_estimates_are_finite_and_covariances_positive_definite_whenever_trackin
             assert np.linalg.eigvalsh(r.cov).min() > 0
             q = r.R_ch @ r.R_ch.T
             np.testing.assert_allclose(q, np.eye(3), atol=1e-9)
+
+
+def test_one_to_one_association_beats_the_paper_rule_with_clutter_beside_the_markers():
+    import dataclasses
+
+    n = len(scenario("flexion")[0].t)
+    noise = dataclasses.replace(acceptance_noise(n), near_clutter_mean=1.5, near_clutter_px=6.0)
+    gnn = track_scenario("flexion", TrackerConfig(association="gnn"), noise=noise, seed=4)
+    paper = track_scenario("flexion", TrackerConfig(association="paper"), noise=noise, seed=4)
+    assert gnn.labelling["clutter_as_marker"] < 0.5 * paper.labelling["clutter_as_marker"]
+    assert gnn.errors.orientation_rmse_deg < paper.errors.orientation_rmse_deg
+    assert gnn.labelling["markers_correct"] >= 0.99
+    assert gnn.errors.orientation_rmse_deg <= 1.5

@@ -11,7 +11,7 @@ import argparse
 import os
 import platform
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ import scipy
 from wristtrack import __version__
 from wristtrack.motion import ConstantRateModel
 from wristtrack.observation import MarkerObservation
-from wristtrack.sim.detections import NoiseModel, simulate_detections
+from wristtrack.sim.detections import NoiseModel, acceptance_noise, simulate_detections
 from wristtrack.sim.motion import SCENARIOS, scenario
 from wristtrack.sim.run import track_scenario
 from wristtrack.tracker import Status, Tracker, TrackerConfig
@@ -148,6 +148,36 @@ def accuracy_table(seeds: tuple[int, ...] = (0,)) -> list[str]:
     return lines
 
 
+ASSOCIATIONS = {
+    "GNN (one-to-one, default)": TrackerConfig(association="gnn"),
+    "exact JPDA": TrackerConfig(association="jpda"),
+    "paper's per-blob rule": TrackerConfig(association="paper"),
+}
+
+
+def association_table(seeds: tuple[int, ...], near_px: float = 8.0) -> list[str]:
+    """The association rules under clutter right next to the markers (the acceptance noise
+    plus 1.5 blobs per frame around random markers), where they differ."""
+    lines = [
+        "| scenario | association | rot RMSE (deg) | pos RMSE (mm) | markers labelled right | "
+        "clutter taken as marker |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in ("deviation", "flexion", "mix"):
+        n = len(scenario(name)[0].t)
+        noise = replace(acceptance_noise(n), near_clutter_mean=1.5, near_clutter_px=near_px)
+        for label, config in ASSOCIATIONS.items():
+            runs = [track_scenario(name, config, noise=noise, seed=s) for s in seeds]
+            lines.append(
+                f"| {name} | {label} | "
+                f"{np.mean([r.errors.orientation_rmse_deg for r in runs]):.2f} | "
+                f"{np.mean([r.errors.position_rmse_mm for r in runs]):.2f} | "
+                f"{np.mean([r.labelling['markers_correct'] for r in runs]):.2%} | "
+                f"{np.mean([r.labelling['clutter_as_marker'] for r in runs]):.2%} |"
+            )
+    return lines
+
+
 def _cpu() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -212,6 +242,16 @@ def main(argv: list[str] | None = None) -> int:
         f"(1.425e-3 z^2 m). Camera-frame errors, mean over seeds {list(seeds)}.",
         "",
         *table,
+        "",
+        "## Association under clutter next to the markers",
+        "",
+        "With clutter spread uniformly over the image all three rules agree (table above). They "
+        "differ when blue blobs sit right beside the markers: the same acceptance noise plus "
+        "1.5 blobs per frame within ~8 px of random markers (at their depth +- 1 cm). The "
+        "paper's rule lets a blob beside a marker claim it as well; the one-to-one rules do "
+        "not. GNN is the default: as accurate as JPDA or better, and cheaper.",
+        "",
+        *association_table(seeds),
         "",
         *pipeline_sections(soak=not args.no_soak),
     ]

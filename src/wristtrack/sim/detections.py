@@ -42,6 +42,11 @@ class NoiseModel:
     p_depth_hole: float = 0.0
     min_facing_cos: float = 0.15
     occlusions: tuple[tuple[int, int, tuple[int, ...]], ...] = ()
+    # Clutter right next to the markers (a blue sleeve, a ring, a second marker sheet): the
+    # hard case for association. Poisson count per frame around random visible markers.
+    near_clutter_mean: float = 0.0
+    near_clutter_px: float = 10.0  # spread of those blobs around the marker, px
+    near_clutter_depth: float = 0.01  # and of their depth around the marker's, m
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.p_miss <= 1.0 and 0.0 <= self.p_depth_hole <= 1.0):
@@ -104,6 +109,8 @@ def simulate_detections(
     labels_all = np.broadcast_to(np.arange(m), (n, m))
     for k, (cu, cz) in enumerate(zip(np.split(c_uv, c_split), np.split(c_z, c_split), strict=True)):
         sel = detected[k]
+        if noise.near_clutter_mean > 0 and seen[k].any():
+            cu, cz = _near_clutter(rng, noise, uv_true[k, seen[k]], z_true[k, seen[k]], cu, cz)
         f_uv = np.concatenate([uv[k, sel], cu])
         f_z = np.concatenate([z[k, sel], cz])
         labels = np.concatenate([labels_all[k, sel], np.full(cz.shape[0], CLUTTER)])
@@ -113,3 +120,12 @@ def simulate_detections(
             depth = np.where(rng.random(f_z.shape[0]) < noise.p_depth_hole, np.nan, f_z[order])
         frames.append(SimFrame(Detections(float(traj.t[k]), f_uv[order], depth), labels[order]))
     return frames
+
+
+def _near_clutter(rng, noise: NoiseModel, uv_markers, z_markers, cu, cz):
+    """Append Poisson-many clutter blobs scattered around randomly chosen visible markers."""
+    count = rng.poisson(noise.near_clutter_mean)
+    near = rng.integers(0, uv_markers.shape[0], count)
+    n_uv = uv_markers[near] + rng.normal(0.0, noise.near_clutter_px, (count, 2))
+    n_z = z_markers[near] + rng.normal(0.0, noise.near_clutter_depth, count)
+    return np.concatenate([cu, n_uv]), np.concatenate([cz, n_z])
