@@ -340,7 +340,22 @@ def _enumerate(
     return cand
 
 
+_HOMOGRAPHY_CHUNK = 4096  # candidates per batched SVD: bounds memory (~5 MB) with many blobs
+
+
 def _homography_scores(X: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_homography_chunk` over chunks of candidates, so memory stays bounded when many
+    blobs give hundreds of thousands of assignments."""
+    if x.shape[0] <= _HOMOGRAPHY_CHUNK:
+        return _homography_chunk(X, x)
+    parts = [
+        _homography_chunk(X, x[s : s + _HOMOGRAPHY_CHUNK])
+        for s in range(0, x.shape[0], _HOMOGRAPHY_CHUNK)
+    ]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _homography_chunk(X: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Batched DLT plane->image homographies for candidates.
 
     X (n,2) layout plane points (normalised), x (K,n,2) image points (normalised camera coords).
