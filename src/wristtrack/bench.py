@@ -25,12 +25,14 @@ from wristtrack.sim.motion import SCENARIOS, scenario
 from wristtrack.sim.run import track_scenario
 from wristtrack.tracker import Status, Tracker, TrackerConfig
 
+DEFAULT_LABEL = "default (SO(3) UKF, GNN, depth)"
+PAPER_LABEL = "paper (Euler UKF, per-blob rule)"
 CONFIGS = {
-    "default (SO(3) UKF, GNN, depth)": TrackerConfig(),
+    DEFAULT_LABEL: TrackerConfig(),
     "default + JPDA": TrackerConfig(association="jpda"),
     "default, paper association": TrackerConfig(association="paper"),
     "default, no depth in updates": TrackerConfig(use_depth=False),
-    "paper (Euler UKF, per-blob rule)": TrackerConfig.paper(),
+    PAPER_LABEL: TrackerConfig.paper(),
 }
 
 
@@ -126,7 +128,8 @@ def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:
     return float(np.median(times))
 
 
-def accuracy_table(seeds: tuple[int, ...] = (0,)) -> list[str]:
+def accuracy_table(seeds: tuple[int, ...] = (0,), findings: dict | None = None) -> list[str]:
+    findings = {} if findings is None else findings
     lines = [
         "| scenario | tracker | pos RMSE (mm) | rot RMSE (deg) | rot p95 (deg) | markers labelled "
         "right | clutter taken as marker | frames lost |",
@@ -141,6 +144,12 @@ def accuracy_table(seeds: tuple[int, ...] = (0,)) -> list[str]:
             ok = np.mean([r.labelling["markers_correct"] for r in runs])
             fp = np.mean([r.labelling["clutter_as_marker"] for r in runs])
             lost = sum(r.lost_frames for r in runs)
+            if config is CONFIGS[DEFAULT_LABEL]:
+                findings["sim_rot"] = max(findings.get("sim_rot", 0.0), rot)
+                findings["sim_pos"] = max(findings.get("sim_pos", 0.0), pos)
+                findings["sim_labels"] = min(findings.get("sim_labels", 1.0), ok)
+            if config is CONFIGS[PAPER_LABEL]:
+                findings["sim_paper_rot"] = min(findings.get("sim_paper_rot", np.inf), rot)
             lines.append(
                 f"| {name} | {label} | {pos:.2f} | {rot:.2f} | {p95:.2f} | {ok:.2%} | {fp:.2%} "
                 f"| {lost} |"
@@ -178,6 +187,37 @@ def association_table(seeds: tuple[int, ...], near_px: float = 8.0) -> list[str]
     return lines
 
 
+def _summary(step: StepTiming, f: dict) -> list[str]:
+    """Plain-language findings, every figure taken from this run's measurements."""
+    ratio = step.filterpy_ms / step.ours_ms if step.filterpy_ms else float("nan")
+    lines = [
+        f"- Accuracy, measurement-level acceptance setting: the default tracker's worst "
+        f"scenario is {f['sim_rot']:.2f} deg / {f['sim_pos']:.2f} mm (targets 1.5 deg / 3 mm), "
+        f"{f['sim_labels']:.2%} of marker blobs labelled right; the paper's configuration is at "
+        f"best {f['sim_paper_rot']:.1f} deg.",
+    ]
+    if "render_rot" in f:
+        lines.append(
+            f"- Rendered RGB-D recordings (detector + tracker): worst default scenario "
+            f"{f['render_rot']:.2f} deg / {f['render_pos']:.2f} mm (targets 2 deg / 5 mm); "
+            f"worst range-of-motion error {f['render_rom']:.2f} deg (target 2 deg): "
+            + ("met." if f["render_rom"] <= 2.0 else "**not met**: the error is the noise "
+               "peak-to-peak of axes that do not move, which offline smoothing should remove.")
+        )
+    lines.append(
+        f"- Speed: a tracker step is {ratio:.1f}x faster than FilterPy's UKF on the same model "
+        + ("(target 10x: met)." if ratio >= 10 else "(target 10x: **not met**; the remaining "
+           "time is NumPy call overhead, see the issue notes).")
+    )
+    if "detect_ms" in f:
+        lines.append(
+            f"- Detection {f['detect_ms']:.2f} ms per frame (target 2 ms: "
+            + ("met" if f["detect_ms"] <= 2.0 else "**not met**")
+            + f"); `track` runs at {f['throughput']:.0%} of decode-only throughput (target 50%)."
+        )
+    return lines
+
+
 def _cpu() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -201,7 +241,10 @@ def main(argv: list[str] | None = None) -> int:
 
     step = time_tracker_step()
     seeds = tuple(range(args.seeds))
-    table = accuracy_table(seeds)
+    findings: dict = {}
+    table = accuracy_table(seeds, findings)
+    association = association_table(seeds)
+    pipeline = pipeline_sections(soak=not args.no_soak, findings=findings)
     ratio = (
         f"{step.filterpy_ms / step.ours_ms:.1f}x faster than FilterPy"
         if step.filterpy_ms
@@ -219,6 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         f"NumPy {np.__version__}, SciPy {scipy.__version__}, FilterPy {filterpy.__version__}; "
         f"{platform.platform()}. Shared machine: compare ratios measured in the same run, not "
         "absolute times.",
+        "",
+        "## Summary",
+        "",
+        *_summary(step, findings),
         "",
         "## Tracker step",
         "",
@@ -251,9 +298,9 @@ def main(argv: list[str] | None = None) -> int:
         "paper's rule lets a blob beside a marker claim it as well; the one-to-one rules do "
         "not. GNN is the default: as accurate as JPDA or better, and cheaper.",
         "",
-        *association_table(seeds),
+        *association,
         "",
-        *pipeline_sections(soak=not args.no_soak),
+        *pipeline,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(text))
