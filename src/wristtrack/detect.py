@@ -43,7 +43,7 @@ from wristtrack.detect_blobs import (
     shapes,
     split_pair,
     trimmed_depth,
-    unmix_two_backgrounds,
+    unmix_two_backgrounds_stack,
     upsample2,
 )
 from wristtrack.detect_colour import (
@@ -323,10 +323,14 @@ class MarkerDetector:
         gy, gx = 2 * (hy0 + wy0), 2 * (hx0 + wx0)
         patch = gather(bgr, gy, gx, (2 * sy, 2 * sx))
         t = blueness(patch, m, b)
-        for k in np.flatnonzero(keep & (spread > cfg.mixed_background * contrast)).tolist():
-            ry, rx = np.flatnonzero(in_y[k]), np.flatnonzero(in_x[k])
-            sl = (slice(2 * ry[0], 2 * ry[-1] + 2), slice(2 * rx[0], 2 * rx[-1] + 2))
-            t[k][sl] = unmix_two_backgrounds(patch[k][sl], hp[k][ring[k].ravel()], m[k])
+        mixed = np.flatnonzero(keep & (spread > cfg.mixed_background * contrast))
+        if mixed.size:
+            # each mixed blob's support (its box) unmixed against two background colours
+            u, ok = unmix_two_backgrounds_stack(patch[mixed], hp[mixed],
+                                                ring[mixed].reshape(len(mixed), -1),
+                                                m[mixed], b[mixed])
+            # (only the support is used below: the rest of each window is zeroed)
+            t[mixed[ok]] = u[ok]
         # weights only inside the support, off other blobs; scaled so the bluest pixel is 1
         t *= upsample2(box & (free | core))
         peak = t.reshape(len(t), -1).max(1)

@@ -52,14 +52,21 @@ def upsample2(a: np.ndarray) -> np.ndarray:
 
 
 @functools.cache
-def _basis(sy: int, sx: int) -> tuple[np.ndarray, float, float]:
-    """Monomials 1, x, y, x^2, xy, y^2, x^3, x^2y, xy^2, y^3 of pixel coordinates relative to
-    the window centre (for conditioning), (sy*sx, 10); and that centre."""
+def _basis(sy: int, sx: int) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Powers 0..3 of pixel coordinates relative to the window centre (for conditioning):
+    (sx, 4) of x and (4, sy) of y, so the raw moments of a window w are Y @ w @ X (two small
+    matrix products per window, cheaper than one product with all the monomials); and that
+    centre."""
     cy, cx = (sy - 1) / 2, (sx - 1) / 2
-    y, x = np.mgrid[0:sy, 0:sx].astype(np.float64)
-    x, y = (x - cx).ravel(), (y - cy).ravel()
-    B = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y, x**3, x * x * y, x * y * y, y**3], 1)
-    return B, cx, cy
+    x = np.arange(sx, dtype=np.float64) - cx
+    y = np.arange(sy, dtype=np.float64) - cy
+    X = np.stack([np.ones_like(x), x, x * x, x**3], 1)
+    Y = np.stack([np.ones_like(y), y, y * y, y**3], 0)
+    return X, Y, cx, cy
+
+
+# (y power, x power) of the raw moments 1, x, y, x^2, xy, y^2, x^3, x^2y, xy^2, y^3
+_POWERS = (np.array([0, 0, 1, 0, 1, 2, 0, 1, 2, 3]), np.array([0, 1, 0, 2, 1, 0, 3, 2, 1, 0]))
 
 
 @dataclass
@@ -125,12 +132,13 @@ SKEW_FLOOR = 0.2
 def shapes(w: np.ndarray) -> Shapes:
     """Shapes of a stack of weight windows (n, sy, sx)."""
     n, sy, sx = w.shape
-    B, ox, oy = _basis(sy, sx)
-    both = np.empty((2 * n, sy * sx))
-    both[:n] = w.reshape(n, -1)
+    X, Y, ox, oy = _basis(sy, sx)
+    both = np.empty((2 * n, sy, sx))
+    both[:n] = w
     np.minimum(both[:n], 1.0, out=both[n:])
     both[n:][both[n:] < SKEW_FLOOR] = 0.0
-    rows = (both @ B).tolist()  # raw moments: the weights, then the firm weights
+    # raw moments: the weights, then the firm weights
+    rows = (Y @ (both @ X))[:, _POWERS[0], _POWERS[1]].tolist()
     out = np.empty((7, n))
     for k in range(n):
         m00, mx, my, second, _ = _central(rows[k])
@@ -215,8 +223,8 @@ def split_pair(w: np.ndarray, cx: float, cy: float, angle: float, waist_ratio: f
     the two boolean half-plane masks, or None.
     """
     h, wd = w.shape
-    ys, xs = np.mgrid[0:h, 0:wd]
-    u = (xs - cx) * math.cos(angle) + (ys - cy) * math.sin(angle)
+    u = ((np.arange(wd) - cx) * math.cos(angle))[None, :] \
+        + ((np.arange(h) - cy) * math.sin(angle))[:, None]
     on = w > 0
     order = np.argsort(u[on], kind="stable")
     uu, ww = u[on][order], w[on][order].astype(np.float64)
@@ -246,3 +254,39 @@ def split_pair(w: np.ndarray, cx: float, cy: float, angle: float, waist_ratio: f
     if at(cut) > waist_ratio * min(at(ml), at(mr)):
         return None
     return u < cut, u >= cut
+
+
+def unmix_two_backgrounds_stack(patch: np.ndarray, ring_px: np.ndarray, ring: np.ndarray,
+                                m: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`unmix_two_backgrounds` for a stack of blobs at once.
+
+    ``patch`` (n, sy, sx, 3) BGR windows; ``ring_px`` (n, P, 3) float64 colours of the
+    background samples' windows and ``ring`` (n, P) bool which of them are ring pixels (at
+    least one each); ``m``, ``b`` (n, 3) marker colours and ring means. Returns the coverage
+    (n, sy, sx) float32 and (n,) bool: False where a ring does not split into two parts of 3
+    samples or more (there :func:`blueness` against ``b`` applies, the coverage is undefined).
+    """
+    n, sy, sx, _ = patch.shape
+    proj = ((ring_px - b[:, None, :]) @ (m - b)[:, :, None])[:, :, 0]
+    low = ring & (proj < 0)
+    high = ring & ~low
+    parts = np.stack([low, high], 1).astype(np.float64)  # (n, 2, P)
+    counts = parts.sum(2)  # (n, 2)
+    ok = counts.min(1) >= 3
+    bg = (parts @ ring_px) / np.maximum(counts, 1)[:, :, None]  # (n, 2, 3)
+    d = m[:, None, :] - bg
+    dd = (d * d).sum(2)  # (n, 2)
+    g = d / np.maximum(dd, 100.0)[:, :, None]
+    # a "background" this close to the marker cannot be unmixed from: infinite residual
+    off = np.where(dd < 100.0, np.inf, 0.0) + (bg * bg).sum(2)  # (n, 2)
+    gb = (bg * g).sum(2)
+    px = patch.reshape(n, -1, 3).astype(np.float64)
+    # per pixel p and background k: coverage a = (p - bg).g and squared residual
+    # |p - bg|^2 - a^2 |d|^2; |p|^2 is common to both backgrounds and left out
+    prod = np.concatenate([g, bg], 1) @ px.transpose(0, 2, 1)  # (n, 4, Q): p.g_k, p.bg_k
+    a0 = prod[:, 0] - gb[:, :1]
+    a1 = prod[:, 1] - gb[:, 1:]
+    r0 = off[:, :1] - 2 * prod[:, 2] - a0 * a0 * dd[:, :1]
+    r1 = off[:, 1:] - 2 * prod[:, 3] - a1 * a1 * dd[:, 1:]
+    best = np.where(r0 <= r1, a0, a1)
+    return np.maximum(best, 0).astype(np.float32).reshape(n, sy, sx), ok

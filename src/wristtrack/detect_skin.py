@@ -166,8 +166,9 @@ class SkinModel:
         ycc = cv2.cvtColor(small, cv2.COLOR_BGR2YCrCb)
         skin = self.mask(ycc)
         grown = cv2.dilate(skin, self._kernel)
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8,
-                                                               ltype=cv2.CV_16U)
+        # (BBDT with 32-bit labels: the same labelling as the default, measurably faster)
+        n, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+            grown, 8, cv2.CV_32S, cv2.CCL_BBDT)
         areas = stats[1:, cv2.CC_STAT_AREA].copy()
         whole = SkinRegion((0, 0, w - w % 2, h - h % 2), None, s)
         # A "skin" component covering most of the picture is a skin-coloured background (a
