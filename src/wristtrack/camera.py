@@ -7,7 +7,6 @@ k5, k6]]), so the same numbers work in ``cv2.projectPoints``.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.errors import ConfigError
+from wristtrack.jsonfile import read_config, write_config
 
 REQUIRED_FIELDS = ("fx", "fy", "cx", "cy", "width", "height", "depth_scale")
 DIST_LENGTHS = (4, 5, 8)
@@ -251,26 +251,12 @@ class Camera:
     @classmethod
     def load(cls, path: str | Path) -> Camera:
         """Read camera.json; every problem is a one-line ConfigError naming the file."""
-        path = Path(path)
-        if not path.is_file():
-            what = "is a directory, not a file" if path.is_dir() else "not found"
-            raise ConfigError(f"camera file {path} {what}; give the path of a camera.json")
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as e:
-            raise ConfigError(
-                f"camera file {path} is not valid JSON ({e.msg} at line {e.lineno}, column "
-                f"{e.colno}); fix the syntax"
-            ) from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise ConfigError(f"camera file {path} cannot be read: {e}") from None
+        d = read_config(path, "camera")
         return cls.from_dict(d, source=str(path))
 
     def save(self, path: str | Path) -> None:
         """Write camera.json (creates the parent folder if needed)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        write_config(path, self.to_dict())
 
     @classmethod
     def default(cls) -> Camera:

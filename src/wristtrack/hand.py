@@ -8,7 +8,6 @@ Hand frame (DESIGN.md section 2): origin at the WRIST marker centre, +X from WRI
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.errors import ConfigError, InitialisationError, InputError
+from wristtrack.jsonfile import read_config, write_config
 
 MARKER_NAMES = ("WRIST", "CMC1", "MCP2", "MCP3", "MCP4", "MCP5")
 MCP3_INDEX = MARKER_NAMES.index("MCP3")
@@ -219,26 +219,12 @@ class HandLayout:
     @classmethod
     def load(cls, path: str | Path) -> HandLayout:
         """Read and validate hand.json; every problem is a one-line ConfigError naming the file."""
-        path = Path(path)
-        if not path.is_file():
-            what = "is a directory, not a file" if path.is_dir() else "not found"
-            raise ConfigError(f"hand file {path} {what}; give the path of a hand.json")
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as e:
-            raise ConfigError(
-                f"hand file {path} is not valid JSON ({e.msg} at line {e.lineno}, column "
-                f"{e.colno}); fix the syntax"
-            ) from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise ConfigError(f"hand file {path} cannot be read: {e}") from None
+        d = read_config(path, "hand")
         return cls.from_dict(d, source=str(path))
 
     def save(self, path: str | Path) -> None:
         """Write hand.json (creates the parent folder if needed)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        write_config(path, self.to_dict())
 
 
 # ----------------------------------------------------------------------------------- estimation
