@@ -95,6 +95,8 @@ def throughput(recording_dir: Path, work: Path, repeats: int = 3) -> tuple[float
     return float(np.median(decode)), float(np.median(track))
 
 
+# Peak RSS from VmHWM: getrusage's ru_maxrss survives fork + exec on Linux, so it would
+# report the (larger) benchmark parent's peak rather than this process's own.
 _SOAK = """
 import resource, sys, time
 from wristtrack.io.recording import open_recording
@@ -104,7 +106,12 @@ with open_recording(sys.argv[1]) as rec:
     start = time.perf_counter()
     track_recording(rec, sys.argv[2], progress=False)
     seconds = time.perf_counter() - start
-print(n, seconds, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+try:
+    status = open("/proc/self/status").read().split("VmHWM:")[1]
+    peak_kib = int(status.split()[0])
+except (OSError, IndexError):
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(n, seconds, peak_kib)
 """
 
 
