@@ -161,35 +161,6 @@ def blueness(patch: np.ndarray, m: np.ndarray, b: np.ndarray) -> np.ndarray:
     return t
 
 
-def unmix_two_backgrounds(patch: np.ndarray, ring: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """Coverage (float32, shape of ``patch`` less its channels) of marker colour ``m`` (3,) at
-    each pixel of a BGR ``patch`` whose background is two surfaces, sampled by the colours
-    ``ring`` (k, 3) around it: the samples are split in two at their mean blueness (against
-    their mean colour), then each pixel is unmixed against the background colour that explains
-    it better (smaller residual). Negative coverage is clipped: here the less blue background
-    is not zero-mean noise."""
-    mean = ring.sum(0) / len(ring)
-    low = (ring - mean) @ (m - mean) < 0
-    parts = np.stack([low, ~low]).astype(np.float64)
-    counts = parts.sum(1)
-    if counts.min() < 3:
-        return blueness(patch[None], m[None], mean[None])[0]
-    bg = (parts @ ring) / counts[:, None]  # (2, 3): the two background colours
-    d = m - bg
-    dd = (d * d).sum(1)
-    like_marker = dd < 100.0  # a "background" this close to the marker cannot be unmixed from
-    g = d / np.maximum(dd, 100.0)[:, None]
-    # per pixel p and background k: coverage a = (p - bg).g and squared residual
-    # |p - bg|^2 - a^2 |d|^2 = |p|^2 - 2 p.bg + |bg|^2 - a^2 |d|^2, from one matrix product
-    px = patch.reshape(-1, 3).astype(np.float64)
-    prod = px @ np.concatenate([g, bg]).T  # (P, 4): p.g_k, p.bg_k
-    a = prod[:, :2] - (bg * g).sum(1)
-    r2 = ((px * px) @ np.ones(3))[:, None] - 2 * prod[:, 2:] + (bg * bg).sum(1) - a * a * dd
-    r2[:, like_marker] = np.inf
-    best = np.where(r2[:, 0] <= r2[:, 1], a[:, 0], a[:, 1])
-    return np.maximum(best, 0).astype(np.float32).reshape(patch.shape[:-1])
-
-
 def trimmed_depth(depth: np.ndarray, mask: np.ndarray, trim: tuple[float, float]) -> np.ndarray:
     """Per window (n, ...) mean of the non-zero raw depths where ``mask`` is set, between the
     ``trim`` quantiles (raw units, float); NaN where no pixel is valid."""
@@ -258,7 +229,12 @@ def split_pair(w: np.ndarray, cx: float, cy: float, angle: float, waist_ratio: f
 
 def unmix_two_backgrounds_stack(patch: np.ndarray, ring_px: np.ndarray, ring: np.ndarray,
                                 m: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`unmix_two_backgrounds` for a stack of blobs at once.
+    """Coverage of the marker colour at each pixel of blob windows whose background is two
+    surfaces (hand edge, occluder edge), for a stack of blobs at once.
+
+    Each ring's samples are split in two at their blueness (against the ring mean), then each
+    pixel is unmixed against the background colour that explains it better (smaller residual).
+    Negative coverage is clipped: here the less blue background is not zero-mean noise.
 
     ``patch`` (n, sy, sx, 3) BGR windows; ``ring_px`` (n, P, 3) float64 colours of the
     background samples' windows and ``ring`` (n, P) bool which of them are ring pixels (at
