@@ -27,7 +27,7 @@ def tracked(tmp_path_factory):
     root = tmp_path_factory.mktemp("export")
     rec = render_recording(root / "rec", "reach", seed=0, n_frames=40, duration=2.5)
     run = root / "run"
-    argv = ["track", str(rec), "--out", str(run), "--no-progress", "--export", "c3d",
+    argv = ["track", str(rec), "--out", str(run), "--no-progress", "--no-report", "--export", "c3d",
             "--export", "trc"]
     assert main(argv) == 0
     return rec, run
