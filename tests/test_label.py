@@ -200,3 +200,17 @@ def test_bad_labels_files_are_one_line_errors(rec, tmp_path, capsys):
             assert main(argv) == 2, (name, argv[0])
             err = capsys.readouterr().err
             assert err.count("\n") == 1 and message in err and "Traceback" not in err, (name, err)
+
+
+def test_labels_in_the_wrong_order_stop_the_run_with_one_line(rec, tmp_path, capsys):
+    truth = _truth_pixels(rec, 0)
+    swapped = truth[[1, 0, 2, 3, 4, 5]]  # WRIST and CMC1 exchanged: every blob still matches
+    path = tmp_path / "swapped.json"
+    ManualLabels(0, 0.0, swapped, truth).save(path)
+    assert main(["label", str(rec), "--labels", str(path), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "fits the markers badly" in err
+    assert main(["track", str(rec), "--out", str(tmp_path / "run"), "--labels", str(path),
+                 "--no-progress", "--no-report"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "manual labels of frame 0 do not initialise" in err
