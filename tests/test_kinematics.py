@@ -12,7 +12,7 @@ from wristtrack import kinematics as kin
 from wristtrack.cli import main
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.geometry import quat_from_matrix
-from wristtrack.io.poses import read_poses, write_truth
+from wristtrack.io.poses import PosesWriter, read_poses, write_truth
 from wristtrack.sim.motion import (
     combine,
     delay,
@@ -23,6 +23,7 @@ from wristtrack.sim.motion import (
     scenario_motion,
 )
 from wristtrack.sim.render import render_recording
+from wristtrack.sim.run import track_scenario
 
 SETTINGS = kin.KinematicsSettings()
 
@@ -61,7 +62,8 @@ def columns_1d(t, x, v=None):
 def test_minimum_jerk_reach_against_analytic_values_and_monalysa(fs):
     D, T, t0 = 0.3, 1.2, 0.8
     t = np.arange(int(round(3.0 * fs))) / fs
-    result = kin.analyse(columns_1d(t, mj_position(t, t0, T, D), mj_speed(t, t0, T, D)))
+    cols = columns_1d(t, mj_position(t, t0, T, D), mj_speed(t, t0, T, D))
+    result = kin.analyse(cols, kin.KinematicsSettings(lowpass_hz=0.0))  # the exact samples
     assert len(result["reaches"]) == 1
     r = result["reaches"][0]
     assert r["peak_speed_m_s"] == pytest.approx(1.875 * D / T, rel=1e-12)  # t0 + T/2 is a sample
@@ -78,6 +80,15 @@ def test_minimum_jerk_reach_against_analytic_values_and_monalysa(fs):
     assert -1.6 <= r["sparc"] <= -1.4
     assert r["sparc"] == pytest.approx(mona_sparc(v, fs)[0], abs=1e-12)
     assert r["log_dimensionless_jerk"] == pytest.approx(mona_ldlj(v, fs, "vel"), abs=1e-12)
+    # The default 6 Hz low-pass leaves a smooth reach as it is (its spectrum lies below 3 Hz).
+    f = kin.analyse(cols)["reaches"][0]
+    assert f["peak_frame"] == r["peak_frame"]
+    assert abs(f["start_frame"] - r["start_frame"]) <= 1
+    assert abs(f["end_frame"] - r["end_frame"]) <= 1
+    assert f["peak_speed_m_s"] == pytest.approx(r["peak_speed_m_s"], rel=2e-3)
+    assert f["sparc"] == pytest.approx(r["sparc"], abs=2e-3)
+    assert f["path_length_m"] == pytest.approx(r["path_length_m"], rel=1e-3)
+    assert f["movement_units"] == 1
 
 
 def test_log_dimensionless_jerk_tends_to_the_analytic_value():
@@ -175,7 +186,7 @@ def test_a_gap_ends_a_reach():
     gap = slice(int((t0 + 0.6 * T) * fs), int((t0 + 0.6 * T) * fs) + 4)  # after the peak
     x[gap] = np.nan
     v[gap] = np.nan
-    result = kin.analyse(columns_1d(t, x, v))
+    result = kin.analyse(columns_1d(t, x, v), kin.KinematicsSettings(lowpass_hz=0.0))
     r1, r2 = result["reaches"]
     assert r1["end_frame"] == gap.start - 1 and r1["truncated"]
     assert r2["start_frame"] == gap.stop and r2["truncated"]
@@ -271,6 +282,46 @@ def test_speed_falls_back_to_differences_and_angular_speed_to_quaternions():
     p = tr.p_rel.copy()
     p[20] = np.nan
     assert np.isnan(kin.speed_profile(tr.t, p, tr.v)[20])
+
+
+def test_lowpass_passes_slow_motion_stops_fast_noise_and_respects_gaps():
+    fs = 60.0
+    t = np.arange(600) / fs
+    slow, fast = np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 15.0 * t)
+    out = kin.lowpass(t, slow + fast, 6.0)
+    inner = slice(60, -60)  # away from the ends' transients
+    assert np.max(np.abs(out[inner] - slow[inner])) < 0.02  # 1 Hz through, 15 Hz down ~ -28 dB
+    # Each run between gaps is filtered on its own: what happens after a gap does not leak back.
+    x = slow.copy()
+    x[300:305] = np.nan
+    y = x.copy()
+    y[305:] += 5.0
+    fx, fy = kin.lowpass(t, x, 6.0), kin.lowpass(t, y, 6.0)
+    assert np.isnan(fx[300:305]).all()
+    np.testing.assert_array_equal(fx[:300], fy[:300])
+    # Irregular timing (jitter, dropped frames): resampled, so a smooth signal stays as it is.
+    rng = np.random.default_rng(0)
+    ti = np.sort(rng.choice(t, 450, replace=False)) + rng.uniform(-0.004, 0.004, 450)
+    si = np.sin(2 * np.pi * 1.0 * ti)
+    assert np.max(np.abs(kin.lowpass(ti, si, 6.0)[40:-40] - si[40:-40])) < 0.01
+
+
+def test_metrics_of_a_tracked_reach_agree_with_its_truth(tmp_path):
+    """The measurement-level tracker on the simulated reach (acceptance noise): its filtered
+    velocities are noisy, the 6 Hz low-pass makes the reach metrics those of the truth."""
+    run = track_scenario("reach", seed=3)
+    with PosesWriter(tmp_path / "poses.csv") as writer:
+        for result in run.results:
+            writer.write_result(result)
+    write_truth(tmp_path / "truth.csv", run.truth)
+    (got,) = kin.analyse_file(tmp_path / "poses.csv")["reaches"]
+    (want,) = kin.analyse_file(tmp_path / "truth.csv")["reaches"]
+    assert abs(got["start_frame"] - want["start_frame"]) <= 2
+    assert abs(got["end_frame"] - want["end_frame"]) <= 2
+    assert got["peak_speed_m_s"] == pytest.approx(want["peak_speed_m_s"], rel=0.05)
+    assert got["path_length_m"] == pytest.approx(want["path_length_m"], rel=0.05)
+    assert got["sparc"] == pytest.approx(want["sparc"], abs=0.05)
+    assert got["movement_units"] == want["movement_units"] == 1
 
 
 # ----------------------------------------------------------------- simulated end to end

@@ -27,6 +27,13 @@ finite; elsewhere central differences of the positions (tx, ty, tz) within runs 
 Angular speed likewise from (wx, wy, wz), else from neighbouring orientations (qw..qz). Rows
 without a position are gaps: no path is drawn across them and they end a movement.
 
+Filtering. Unless ``lowpass_hz`` is 0, the velocities, angular velocities and positions are
+low-passed (zero-phase 2nd-order Butterworth, 6 Hz by default, a common cut-off for reaching
+kinematics; each run between gaps on its own, irregular timing resampled) before speeds, path
+lengths and reach metrics are taken. Without it the tracker's velocity noise, rectified by the
+norm, keeps the speed above 2 % of the peak long after a reach and breaks it into spurious
+movement units. The whole-run path length still accumulates some jitter of the hand at rest.
+
 Reaches. A movement starts where the speed first rises above ``entry_speed_m_s`` (hysteresis:
 noise at rest never gets that far); its onset and offset are the nearest samples, before and
 after its peak, where the speed falls below ``onset_fraction`` (2 %) of that peak, or a gap.
@@ -73,6 +80,7 @@ _ANGLE_COLUMNS = ("deviation_deg", "flexion_deg", "pronation_deg")
 class KinematicsSettings:
     """Thresholds of the reach segmentation and the smoothness measures (DESIGN.md section 6)."""
 
+    lowpass_hz: float = 6.0  # zero-phase low-pass of the velocities before anything (0: off)
     onset_fraction: float = 0.02  # onset/offset where speed crosses this fraction of the peak
     entry_speed_m_s: float = 0.05  # a movement must exceed this (hysteresis against rest noise)
     min_peak_speed_m_s: float = 0.1  # slower "movements" are drift or noise, not reaches
@@ -146,10 +154,10 @@ def _as_xyz(a: np.ndarray, name: str) -> np.ndarray:
 # ----------------------------------------------------------------------------- speeds
 
 
-def speed_profile(t: np.ndarray, p: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
-    """Linear speed (N,), m/s, at timestamps ``t`` (N,) of positions ``p`` (N,3).
+def velocity_profile(t: np.ndarray, p: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+    """Linear velocity (N,3), m/s, at timestamps ``t`` (N,) of positions ``p`` (N,3).
 
-    Where a velocity ``v`` (N,3) is given and finite its norm is used (the tracker's filtered
+    Where a velocity ``v`` (N,3) is given and finite it is used (the tracker's filtered
     estimate); elsewhere central differences of ``p`` within runs of finite rows (one-sided at a
     run's ends). NaN where the position is unknown or a run has a single row.
     """
@@ -159,45 +167,100 @@ def speed_profile(t: np.ndarray, p: np.ndarray, v: np.ndarray | None = None) -> 
         raise InputError(f"{len(t)} timestamps for {len(p)} positions")
     valid = _position_valid(t, p)
     _check_times(t, valid)
-    speed = np.full(len(t), np.nan)
+    out = np.full((len(t), 3), np.nan)
     if v is not None:
-        given = np.linalg.norm(_as_xyz(v, "velocities"), axis=1)
-        use = valid & np.isfinite(given)
-        speed[use] = given[use]
-    need = valid & ~np.isfinite(speed)
-    if need.any():
-        for a, b in _runs(valid):
-            if b - a >= 2 and need[a:b].any():
-                dp = np.gradient(p[a:b], t[a:b], axis=0, edge_order=1)
-                speed[a:b] = np.where(need[a:b], np.linalg.norm(dp, axis=1), speed[a:b])
-    return speed
+        v = _as_xyz(v, "velocities")
+        use = valid & np.isfinite(v).all(axis=1)
+        out[use] = v[use]
+    need = valid & ~np.isfinite(out).all(axis=1)
+    for a, b in _runs(valid):
+        if b - a >= 2 and need[a:b].any():
+            dp = np.gradient(p[a:b], t[a:b], axis=0, edge_order=1)
+            out[a:b] = np.where(need[a:b, None], dp, out[a:b])
+    return out
+
+
+def speed_profile(t: np.ndarray, p: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+    """Linear speed (N,), m/s: the norm of :func:`velocity_profile` (NaN where unknown)."""
+    return np.linalg.norm(velocity_profile(t, p, v), axis=1)
+
+
+def angular_velocity_profile(
+    t: np.ndarray, q: np.ndarray, w: np.ndarray | None = None
+) -> np.ndarray:
+    """Angular velocity (N,3), rad/s in W0: ``w`` where finite, else from the neighbouring
+    orientations (unit quaternions ``q`` (N,4), w x y z, hand relative to W0) within runs of
+    finite rows: log(R_next R_prev^T) / (t_next - t_prev). NaN where the orientation is unknown."""
+    from wristtrack.geometry import matrix_from_quat, so3_log
+
+    t = np.asarray(t, dtype=float).reshape(-1)
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or q.shape[1] != 4 or len(q) != len(t):
+        raise InputError(f"quaternions must be ({len(t)}, 4), got shape {q.shape}")
+    valid = np.isfinite(q).all(axis=1) & np.isfinite(t)
+    _check_times(t, valid)
+    out = np.full((len(t), 3), np.nan)
+    if w is not None:
+        w = _as_xyz(w, "angular velocities")
+        use = valid & np.isfinite(w).all(axis=1)
+        out[use] = w[use]
+    need = valid & ~np.isfinite(out).all(axis=1)
+    for a, b in _runs(valid):
+        if b - a < 2 or not need[a:b].any():
+            continue
+        R = matrix_from_quat(q[a:b])
+        idx = np.arange(b - a)
+        lo, hi = np.maximum(idx - 1, 0), np.minimum(idx + 1, b - a - 1)
+        rotvec = so3_log(R[hi] @ np.swapaxes(R[lo], -1, -2))
+        diff = rotvec / (t[a:b][hi] - t[a:b][lo])[:, None]
+        out[a:b] = np.where(need[a:b, None], diff, out[a:b])
+    return out
 
 
 def angular_speed_profile(
     t: np.ndarray, q: np.ndarray, w: np.ndarray | None = None
 ) -> np.ndarray:
-    """Angular speed (N,), rad/s: |w| where finite, else from neighbouring unit quaternions
-    ``q`` (N,4) (w, x, y, z) within runs of finite rows. NaN where the orientation is unknown."""
+    """Angular speed (N,), rad/s: the norm of :func:`angular_velocity_profile`."""
+    return np.linalg.norm(angular_velocity_profile(t, q, w), axis=1)
+
+
+def lowpass(t: np.ndarray, x: np.ndarray, cutoff_hz: float, order: int = 2) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of ``x`` (N,) or (N,k) sampled at ``t`` (N,), run by run.
+
+    Rows with a NaN are gaps: each run of finite rows is filtered on its own (nothing leaks
+    across a gap), and NaN rows stay NaN. A run with irregular timing (jitter, dropped frames)
+    is resampled to its median frame interval, filtered and interpolated back. Runs of fewer
+    than 4 rows, and runs whose Nyquist frequency is below the cut-off, are left as they are.
+    """
+    from scipy.interpolate import CubicSpline
+    from scipy.signal import butter, sosfiltfilt
+
     t = np.asarray(t, dtype=float).reshape(-1)
-    q = np.asarray(q, dtype=float)
-    valid = np.isfinite(q).all(axis=1) & np.isfinite(t)
+    x = np.asarray(x, dtype=float)
+    flat = x.ndim == 1
+    x2 = x[:, None] if flat else x
+    if len(x2) != len(t):
+        raise InputError(f"{len(t)} timestamps for {len(x2)} samples to filter")
+    valid = np.isfinite(x2).all(axis=1) & np.isfinite(t)
     _check_times(t, valid)
-    rate = np.full(len(t), np.nan)
-    if w is not None:
-        given = np.linalg.norm(_as_xyz(w, "angular velocities"), axis=1)
-        use = valid & np.isfinite(given)
-        rate[use] = given[use]
-    need = valid & ~np.isfinite(rate)
+    out = np.where(valid[:, None], x2, np.nan)
     for a, b in _runs(valid):
-        if b - a < 2 or not need[a:b].any():
+        if b - a < 4:
             continue
-        idx = np.arange(a, b)
-        lo, hi = np.maximum(idx - 1, a), np.minimum(idx + 1, b - 1)
-        # angle of q_lo^-1 q_hi = 2 acos|<q_lo, q_hi>|; the sign of q does not matter
-        dots = np.clip(np.abs(np.einsum("ij,ij->i", q[lo], q[hi])), 0.0, 1.0)
-        diff = 2.0 * np.arccos(dots) / (t[hi] - t[lo])
-        rate[a:b] = np.where(need[a:b], diff, rate[a:b])
-    return rate
+        tt, xx = t[a:b], x2[a:b]
+        dt = float(np.median(np.diff(tt)))
+        if cutoff_hz >= 0.5 / dt:
+            continue
+        sos = butter(order, cutoff_hz * 2.0 * dt, output="sos")
+        regular = np.all(np.abs(np.diff(tt) / dt - 1.0) < 1e-3)
+        # irregular: a uniform grid over the run (its last point may pass the end by < dt)
+        grid = tt if regular else tt[0] + np.arange(math.ceil((tt[-1] - tt[0]) / dt) + 1) * dt
+        # cubic, not linear: a few dropped frames in a row must not cut the corners of a reach
+        xs = xx if regular else CubicSpline(tt, xx, axis=0)(grid)
+        pad = min(3 * (2 * len(sos) + 1), len(grid) - 1)
+        ys = sosfiltfilt(sos, xs, axis=0, padlen=pad)
+        out[a:b] = ys if regular else CubicSpline(grid, ys, axis=0)(tt)
+    return out[:, 0] if flat else out
 
 
 def path_length(p: np.ndarray) -> float:
@@ -470,13 +533,21 @@ def analyse(
     if len(p) != len(t):
         raise InputError(f"pose columns differ in length ({len(t)} timestamps, {len(p)} rows)")
     valid = _position_valid(t, p)
-    speed = speed_profile(t, p, _column(columns, ("vx", "vy", "vz")))
+    velocity = velocity_profile(t, p, _column(columns, ("vx", "vy", "vz")))
     q = _column(columns, ("qw", "qx", "qy", "qz"))
-    rate = (
-        np.degrees(angular_speed_profile(t, q, _column(columns, ("wx", "wy", "wz"))))
+    omega = (
+        angular_velocity_profile(t, q, _column(columns, ("wx", "wy", "wz")))
         if q is not None
-        else np.full(len(t), np.nan)
+        else np.full((len(t), 3), np.nan)
     )
+    if settings.lowpass_hz > 0:
+        # Tracking noise rectified by |.| would otherwise hold the speed above the 2 % threshold
+        # at rest, split reaches into spurious units and add jitter to the path length.
+        velocity = lowpass(t, velocity, settings.lowpass_hz)
+        omega = lowpass(t, omega, settings.lowpass_hz)
+        p = lowpass(t, p, settings.lowpass_hz)
+    speed = np.linalg.norm(velocity, axis=1)
+    rate = np.degrees(np.linalg.norm(omega, axis=1))
     angles = _column(columns, _ANGLE_COLUMNS)
     fs = frame_rate(t, valid)
     reaches = []
@@ -544,9 +615,11 @@ __all__ = [
     "analyse",
     "analyse_file",
     "angular_speed_profile",
+    "angular_velocity_profile",
     "format_reaches",
     "frame_rate",
     "log_dimensionless_jerk",
+    "lowpass",
     "movement_units",
     "path_length",
     "range_of_motion",
@@ -554,4 +627,5 @@ __all__ = [
     "segment_reaches",
     "sparc",
     "speed_profile",
+    "velocity_profile",
 ]
