@@ -139,11 +139,34 @@ def test_summary_and_reach_tables_equal_the_run_files(run):
     from wristtrack.kinematics import analyse
 
     kin = summary.get("kinematics") or analyse(poses)
-    assert kin["reaches"], "the rendered reach must give at least one reach"
-    for n, reach in enumerate(kin["reaches"], 1):
+    _check_reach_table(cells, kin["reaches"])
+
+
+def _check_reach_table(cells: dict[str, str], reaches: list[dict]) -> None:
+    for n, reach in enumerate(reaches, 1):
         for key, _, _, scale in REACH_COLUMNS:
             _close(cells[f"reach-{n}-{key}"], reach[key], scale)
-    assert f"reach-{len(kin['reaches']) + 1}-sparc" not in cells
+    assert f"reach-{len(reaches) + 1}-sparc" not in cells
+
+
+def test_report_of_the_simulated_truth_lists_its_reach(recording, tmp_path):
+    # truth.csv has the poses.csv columns: a report of the truth itself, with a bare summary,
+    # must show the reach the simulator performed (the tracked 40-frame run may lose part of it).
+    from wristtrack.kinematics import analyse
+
+    shutil.copy(recording / "truth.csv", tmp_path / "poses.csv")
+    truth = read_poses(tmp_path / "poses.csv")
+    kin = analyse(truth)
+    (tmp_path / "summary.json").write_text(json.dumps({"range_of_motion": kin["range_of_motion"]}))
+    text = write_report(tmp_path).read_text(encoding="utf-8")
+    assert len(kin["reaches"]) == 1
+    cells = _parse(text).text
+    _check_reach_table(cells, kin["reaches"])
+    # The reach spans the simulated movement: its peak is the truth's peak speed (to the 2 % a
+    # resampled profile may differ by).
+    v = np.linalg.norm(np.column_stack([truth[c] for c in ("vx", "vy", "vz")]), axis=1)
+    assert float(cells["reach-1-peak_speed_m_s"]) == pytest.approx(v.max(), rel=0.02)
+    assert cells["peak-speed"] == "\u2013" and "No wrist estimate" not in text
 
 
 def test_every_image_is_an_embedded_png_and_matches_the_figures_folder(run):
