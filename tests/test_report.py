@@ -25,7 +25,7 @@ from wristtrack.io.recording import open_recording
 from wristtrack.measurements import Detections
 from wristtrack.overlay import OverlayWriter
 from wristtrack.pipeline import track_recording
-from wristtrack.report import FIGURES, REACH_COLUMNS, write_report
+from wristtrack.report import FIGURES, REACH_COLUMNS, build_figures, write_report
 from wristtrack.sim.render import render_recording
 from wristtrack.summary import SummaryAccumulator, write_json_atomic
 from wristtrack.tracker import FrameResult, Status
@@ -167,6 +167,14 @@ def test_report_of_the_simulated_truth_lists_its_reach(recording, tmp_path):
     v = np.linalg.norm(np.column_stack([truth[c] for c in ("vx", "vy", "vz")]), axis=1)
     assert float(cells["reach-1-peak_speed_m_s"]) == pytest.approx(v.max(), rel=0.02)
     assert cells["peak-speed"] == "\u2013" and "No wrist estimate" not in text
+    # The speed figure draws the speed the reach was measured on: its peak mark is the reach's.
+    speed_ax = build_figures(truth, kin)["speed"].axes[0]
+    peak = next(line for line in speed_ax.lines if line.get_marker() == "v")
+    reach = kin["reaches"][0]
+    frame = np.median(np.diff(truth["timestamp"]))
+    assert peak.get_xdata()[0] == pytest.approx(reach["onset_s"] + reach["time_to_peak_s"],
+                                                abs=1.01 * frame)
+    assert peak.get_ydata()[0] == pytest.approx(reach["peak_speed_m_s"], rel=0.01)
 
 
 def test_every_image_is_an_embedded_png_and_matches_the_figures_folder(run):

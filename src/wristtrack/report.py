@@ -24,7 +24,7 @@ from wristtrack import report_figures as rf
 from wristtrack.errors import InputError
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.io.poses import read_poses
-from wristtrack.kinematics import analyse, speed_profile
+from wristtrack.kinematics import KinematicsSettings, analyse, lowpass, velocity_profile
 
 FIGURES = (
     ("trajectory", "Wrist trajectory (XY, ZX and ZY planes)"),
@@ -105,11 +105,20 @@ def _kinematics(columns: dict[str, np.ndarray], summary: dict[str, Any]) -> dict
     return analyse(columns)
 
 
-def _speed(columns: dict[str, np.ndarray], p: np.ndarray) -> np.ndarray:
-    """The speed the reaches were segmented on: the filter's |v|, differences of p where v is
-    unknown (kinematics.speed_profile, as analyse uses it)."""
-    v = np.column_stack([columns[c] for c in ("vx", "vy", "vz")])
-    return np.asarray(speed_profile(columns["timestamp"], p, v), dtype=float)
+def _speeds(
+    columns: dict[str, np.ndarray], p: np.ndarray, kin: dict[str, Any] | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(as tracked, as analysed) wrist speed: the filter's |v| (differences of p where v is
+    unknown), and the same after the kinematics' low-pass, the speed the reaches were segmented
+    and measured on (kinematics.analyse does the same steps)."""
+    t = columns["timestamp"]
+    velocity = velocity_profile(t, p, np.column_stack([columns[c] for c in ("vx", "vy", "vz")]))
+    raw = np.linalg.norm(velocity, axis=1)
+    settings = (kin or {}).get("settings") or {}
+    cutoff = settings.get("lowpass_hz", KinematicsSettings().lowpass_hz)
+    if not (isinstance(cutoff, int | float) and cutoff > 0):
+        return raw, raw
+    return raw, np.linalg.norm(lowpass(t, velocity, float(cutoff)), axis=1)
 
 
 # ------------------------------------------------------------------------------ figures
@@ -136,14 +145,14 @@ def build_figures(columns: dict[str, np.ndarray], kin: dict[str, Any] | None) ->
     if ok.any():
         R[ok] = matrix_from_quat(q[ok])
     angles = np.column_stack([columns[f"{a}_deg"] for a in rf.AXIS_NAMES])
-    speed = _speed(columns, p_m)
+    raw_speed, speed = _speeds(columns, p_m, kin)
     reaches = _reach_frames(kin, len(t))
     peaks = [a + int(np.nanargmax(speed[a:b + 1])) for a, b in reaches
              if np.isfinite(speed[a:b + 1]).any()]
     return {
         "trajectory": rf.trajectory_figure(p_m * 1000.0),
         "angles": rf.angles_figure(t, angles),
-        "speed": rf.speed_figure(t, speed, reaches, peaks),
+        "speed": rf.speed_figure(t, speed, reaches, peaks, raw_speed),
         "orientation": rf.orientation_figure(p_m * 1000.0, R),
         "quality": rf.quality_figure(
             t, columns["status"], columns["n_visible"], columns["n_clutter"],

@@ -150,15 +150,19 @@ def speed_figure(
     speed_m_s: np.ndarray,
     reaches: Sequence[tuple[int, int]] = (),
     peaks: Sequence[int] = (),
+    raw_speed_m_s: np.ndarray | None = None,
 ) -> Figure:
     """Wrist speed against time (the paper's Fig. 6), reaches shaded and numbered.
 
-    ``reaches`` are inclusive (start, end) frame indices (onset, offset); ``peaks`` the frame of
-    each reach's peak speed, marked with a triangle.
+    ``speed_m_s`` is the speed the reaches were measured on; ``reaches`` are inclusive
+    (start, end) frame indices (onset, offset); ``peaks`` the frame of each reach's peak speed,
+    marked with a triangle. ``raw_speed_m_s``, if given, is drawn faintly behind (the speed
+    before the analysis' low-pass).
     """
     t = np.asarray(t, dtype=float).reshape(-1)
     s = np.asarray(speed_m_s, dtype=float).reshape(-1)
     finite = np.isfinite(s)
+    raw = None if raw_speed_m_s is None else np.asarray(raw_speed_m_s, dtype=float).reshape(-1)
     fig = _new(2.8)
     ax = fig.subplots()
     ax.set_ylabel("speed (m/s)")
@@ -168,8 +172,11 @@ def speed_figure(
         _empty_note(ax)
         return fig
     idx = plot_indices(finite)
-    ax.plot(t[idx], s[idx], color="black", lw=1.0, label="wrist speed")
     top = float(np.nanmax(s))
+    if raw is not None and np.isfinite(raw).any():
+        ax.plot(t[idx], raw[idx], color="#999999", lw=0.8, label="as tracked")
+        top = max(top, float(np.nanmax(raw)))
+    ax.plot(t[idx], s[idx], color="black", lw=1.2, label="wrist speed (analysed)")
     for n, (start, end) in enumerate(reaches, 1):
         ax.axvspan(t[start], t[end], color="#1f77b4", alpha=0.15, lw=0,
                    label="reach (onset to offset)" if n == 1 else None)
