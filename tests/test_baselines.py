@@ -34,6 +34,16 @@ def test_opencv_baseline_is_exact_on_noiseless_frames():
         np.testing.assert_allclose(r.t_ch, truth.t_ch[i], atol=1e-6)
 
 
+def test_opencv_baseline_without_hand_json_measures_the_layout():
+    truth, camera, _, frames, step = _noiseless(n_frames=4)
+    tracker = OpenCVPnPTracker(camera, None)
+    for k, f in enumerate(frames):
+        r = tracker.step(f.detections)
+        np.testing.assert_array_equal(r.labels, f.labels)
+        assert rotation_distance(r.R_ch, truth.R_ch[k * step]) < 1e-6
+        np.testing.assert_allclose(r.t_ch, truth.t_ch[k * step], atol=1e-6)
+
+
 def test_opencv_baseline_labels_with_missing_markers_and_refuses_too_few():
     truth, camera, layout, frames, step = _noiseless(n_frames=20, p_miss=0.25, seed=3)
     tracker = OpenCVPnPTracker(camera, layout)

@@ -18,7 +18,7 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import InitialisationError
 from wristtrack.hand import HandLayout
-from wristtrack.initialise import label_markers
+from wristtrack.initialise import initialise, label_markers
 from wristtrack.measurements import Detections
 from wristtrack.tracker import FrameResult, Status
 
@@ -34,18 +34,23 @@ class OpenCVPnPTracker:
     """Per-frame labelling + ``cv2.solvePnP(SOLVEPNP_IPPE)``; ``step`` as ``Tracker.step``.
 
     W0 (for the pose relative to it) is the first frame's estimate, as in the tracker. The
-    layout must be planar (z = 0), as IPPE requires; otherwise SQPnP is used.
+    layout must be planar (z = 0), as IPPE requires; otherwise SQPnP is used. Without a layout
+    it is measured from depth at the first frame that allows it (``initialise``).
     """
 
-    def __init__(self, camera: Camera, layout: HandLayout, pixel_sigma: float = 0.7):
+    def __init__(self, camera: Camera, layout: HandLayout | None, pixel_sigma: float = 0.7):
         self.camera = camera
-        self.points = np.asarray(layout.points, dtype=float)
         self.pixel_sigma = pixel_sigma
-        self.planar = bool(np.abs(self.points[:, 2]).max() < 1e-9)
         self.dist = None if camera.dist is None else np.asarray(camera.dist, dtype=float)
         self.R_c0: np.ndarray | None = None
         self.t_c0: np.ndarray | None = None
         self._frame = -1
+        if layout is not None:
+            self._set_layout(layout)
+
+    def _set_layout(self, layout: HandLayout) -> None:
+        self.points = np.asarray(layout.points, dtype=float)
+        self.planar = bool(np.abs(self.points[:, 2]).max() < 1e-9)
         n = self.points.shape[0]
         self._triples = np.array(list(combinations(range(n), 3)))
         P = self.points[self._triples]
@@ -120,6 +125,9 @@ class OpenCVPnPTracker:
     def step(self, det: Detections) -> FrameResult:
         self._frame += 1
         try:
+            if not hasattr(self, "points"):
+                # no hand.json: measure the layout from depth once, as the tracker does
+                self._set_layout(initialise(det, self.camera, None).layout)
             labels = self.label(det)
             pose = self.solve(det, labels)
         except InitialisationError:
