@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
+import threading
 import uuid
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -102,6 +104,15 @@ def find_recordings(study: str | Path, exclude: str | Path | None = None) -> lis
 # --------------------------------------------------------------------------------- worker
 
 
+_POOL_WORKER = False  # set in the processes of the local pool
+
+
+def _pool_worker() -> None:
+    global _POOL_WORKER
+    _POOL_WORKER = True
+    limit_threads()
+
+
 def limit_threads() -> None:
     """One thread per worker for OpenCV and (where not loaded yet) the BLAS libraries."""
     for name in THREAD_ENV:
@@ -140,6 +151,10 @@ def track_one(
             except CheckpointMismatch:  # the recording or the settings changed: start over
                 summary = track_recording(recording, out, config, **kw)
         return row_from_summary(job.name, "ok", summary)
+    except KeyboardInterrupt:
+        if _POOL_WORKER:  # the batch stopped us (SIGTERM), the run is checkpointed: take no
+            os._exit(130)  # further task from the pool's queue
+        raise
     except WristtrackError as exc:
         return row_without_run(job.name, "failed", str(exc))
     except Exception as exc:  # a bug must not stop the study either; say it is one
@@ -169,15 +184,27 @@ def _single_threaded_env() -> Iterator[None]:
 Runner = Iterator[tuple[Job, dict[str, Any]]]
 
 
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
 def _run_pool(jobs: list[Job], out: Path, workers: int, args: tuple) -> Runner:
     # spawn: fresh interpreters, no inherited threads (tqdm's monitor) or library state
     context = multiprocessing.get_context("spawn")
     with _single_threaded_env():
-        pool = ProcessPoolExecutor(min(workers, len(jobs)), context, initializer=limit_threads)
+        pool = ProcessPoolExecutor(min(workers, len(jobs)), context, initializer=_pool_worker)
         try:
-            futures = {
-                pool.submit(track_one, job, str(out / job.name), *args): job for job in jobs
-            }
+            # The workers start (all at once) at the first submit. They ignore SIGINT, so a
+            # Ctrl-C reaches only this process, which then stops them with SIGTERM: a worker
+            # tracking then checkpoints and stops, one starting up just ends, no traceback.
+            handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if _main_thread() else None
+            try:
+                futures = {
+                    pool.submit(track_one, job, str(out / job.name), *args): job for job in jobs
+                }
+            finally:
+                if handler is not None:
+                    signal.signal(signal.SIGINT, handler)
             for future in as_completed(futures):
                 job = futures[future]
                 try:

@@ -25,13 +25,16 @@ SCENARIOS = ("deviation", "flexion", "pronation")
 
 
 def render_study(folder: str | Path, n_recordings: int = 6, n_frames: int = 120) -> Path:
-    """``n_recordings`` simulated recordings of ``n_frames`` frames each under ``folder``."""
+    """``n_recordings`` simulated recordings of ``n_frames`` frames each under ``folder``, at
+    10 fps: the movement then lasts n_frames / 10 s, slow enough to be tracked throughout (a
+    benchmark of runs that lose the hand would time re-initialisation instead)."""
     folder = Path(folder)
     for i in range(n_recordings):
         scenario = SCENARIOS[i % len(SCENARIOS)]
         target = folder / f"s{i:02d}_{scenario}"
         if not (target / "truth.csv").is_file():  # rendered already (a re-used folder)
-            render_recording(target, scenario, seed=i, n_frames=n_frames, overwrite=True)
+            render_recording(target, scenario, seed=i, n_frames=n_frames, fps=10.0,
+                             overwrite=True)
     return folder
 
 
