@@ -338,6 +338,26 @@ def test_orientation_figure_draws_the_hand_axes_of_each_instant():
         assert np.diff(line.get_xdata())[0] == pytest.approx(-15.0)
 
 
+def test_orientation_instants_spread_over_the_movement_not_the_rest():
+    # 200 frames at rest with tracking jitter (0.3 mm, 0.3 deg), then 100 frames moving 200 mm.
+    rng = np.random.default_rng(3)
+    p = np.zeros((300, 3))
+    p[:200] += rng.normal(0, 0.3, (200, 3))
+    p[200:, 0] = np.linspace(0, 200, 100)
+    small = np.radians(0.3) * rng.normal(size=(300, 3))
+    R = np.array([cv2.Rodrigues(w)[0] for w in small])
+    finite = np.ones(300, bool)
+    finite[250] = False  # a frame without estimate is never picked
+    picks = rf.sample_instants(finite, 12, p, R)
+    assert 10 <= picks.size <= 12 and picks[0] == 0 and picks[-1] == 299 and 250 not in picks
+    assert np.sum(picks < 200) == 1  # the rest, however long, gets only its start
+    gaps = np.diff(p[picks[1:], 0])
+    assert gaps.min() > 10 and gaps.max() < 35  # about 200 mm / 10 between picks
+    # Nothing moves: evenly in time.
+    assert rf.sample_instants(np.ones(100, bool), 5, np.zeros((100, 3))).tolist() == [
+        0, 25, 50, 74, 99]
+
+
 def test_quality_figure_colours_each_status_run():
     status = np.array(["initialising"] * 3 + ["tracking"] * 10 + ["coasting"] * 2
                       + ["lost"] * 4 + ["tracking"] * 6)

@@ -8,6 +8,7 @@ function accepts a run with no estimate at all and then draws the empty state wi
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import cv2
@@ -189,12 +190,55 @@ def speed_figure(
     return fig
 
 
-def sample_instants(finite: np.ndarray, count: int = 12) -> np.ndarray:
-    """Up to ``count`` frame indices spread evenly over the frames that have an estimate."""
+def sample_instants(
+    finite: np.ndarray, count: int = 12, p: np.ndarray | None = None, R: np.ndarray | None = None
+) -> np.ndarray:
+    """Up to ``count`` frame indices among those with an estimate, spread over the movement.
+
+    Walking forward, a frame is taken once its pose differs enough from the last one taken
+    (20 mm or 10 degrees count as one unit; the step is the largest departure from the first
+    pose over count - 1, at least a quarter unit), so rests do not take the samples and tracking
+    jitter does not add up as a path would. Evenly in time when nothing moves.
+    """
     rows = np.flatnonzero(np.asarray(finite, dtype=bool))
     if rows.size <= count:
         return rows
-    return rows[np.round(np.linspace(0, rows.size - 1, count)).astype(int)]
+    rows = rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, 4000)).astype(int))]
+    n = rows.size
+    pos = np.zeros((n, 3)) if p is None else np.asarray(p, float)[rows] / 20.0
+    rot = np.repeat(np.eye(3)[None], n, 0) if R is None else np.asarray(R, float)[rows]
+    deg10 = np.radians(10.0)
+
+    def departure(i: int) -> np.ndarray:  # pose difference of every row from row i, in units
+        cos = (np.einsum("ij,nij->n", rot[i], rot) - 1.0) / 2.0
+        angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        return np.linalg.norm(pos - pos[i], axis=1) + angle / deg10
+
+    step = max(float(departure(0).max()) / (count - 1), 0.25)
+    picks, last = [0], 0
+    pos_l, rot_l = pos.tolist(), rot  # scalar loop: one small comparison per row
+    for i in range(1, n):
+        dp = math.dist(pos_l[i], pos_l[last])
+        if dp >= step:
+            picks.append(i)
+            last = i
+            continue
+        cos = (float(np.vdot(rot_l[i], rot_l[last])) - 1.0) / 2.0
+        if dp + math.acos(min(1.0, max(-1.0, cos))) / deg10 >= step:
+            picks.append(i)
+            last = i
+    if len(picks) == 1:
+        return rows[np.round(np.linspace(0, n - 1, count)).astype(int)]
+    # The final pose is always shown: it replaces the last pick when the two are close.
+    if picks[-1] != n - 1:
+        if departure(n - 1)[picks[-1]] >= step / 2:
+            picks.append(n - 1)
+        else:
+            picks[-1] = n - 1
+    picks_a = np.asarray(picks)
+    if picks_a.size > count:
+        picks_a = picks_a[np.round(np.linspace(0, picks_a.size - 1, count)).astype(int)]
+    return rows[picks_a]
 
 
 def orientation_figure(p_mm: np.ndarray, R: np.ndarray, count: int = 12) -> Figure:
@@ -209,7 +253,7 @@ def orientation_figure(p_mm: np.ndarray, R: np.ndarray, count: int = 12) -> Figu
     finite = np.isfinite(p).all(axis=1) & np.isfinite(R).all(axis=(1, 2))
     fig = _new(3.0)
     axes = fig.subplots(1, 3)
-    picks = sample_instants(finite, count)
+    picks = sample_instants(finite, count, p, R)
     if picks.size:
         extent = float(np.ptp(p[finite], axis=0).max())
         length = max(0.15 * extent, 15.0)  # mm; a still hand still shows readable axes
