@@ -75,8 +75,9 @@ def _beside(path: Path, kind: str) -> str | None:
 
 
 def find_recordings(study: str | Path, exclude: str | Path | None = None) -> list[Job]:
-    """Every recording under ``study`` (not under ``exclude``, nor in hidden folders), sorted."""
-    study = Path(study)
+    """Every recording under ``study`` (not under ``exclude``, nor in hidden folders), sorted.
+    Sources are absolute paths, so workers with another working folder (Dask) find them."""
+    study = Path(study).resolve()
     skip = Path(exclude).resolve() if exclude is not None else None
     jobs = []
     for folder, dirs, files in os.walk(study):
