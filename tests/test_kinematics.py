@@ -322,6 +322,13 @@ def test_metrics_of_a_tracked_reach_agree_with_its_truth(tmp_path):
     assert got["path_length_m"] == pytest.approx(want["path_length_m"], rel=0.05)
     assert got["sparc"] == pytest.approx(want["sparc"], abs=0.05)
     assert got["movement_units"] == want["movement_units"] == 1
+    # speed_series gives the figures the speed the reaches were measured on, and the raw one
+    columns = read_poses(tmp_path / "poses.csv")
+    raw, analysed = kin.speed_series(columns)
+    assert analysed[got["peak_frame"]] == got["peak_speed_m_s"]
+    v = np.linalg.norm(np.column_stack([columns[c] for c in ("vx", "vy", "vz")]), axis=1)
+    known = np.isfinite(v)
+    np.testing.assert_array_equal(raw[known], v[known])
 
 
 def test_streamed_columns_equal_read_poses(tmp_path):

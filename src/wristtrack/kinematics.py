@@ -523,11 +523,8 @@ def frame_rate(t: np.ndarray, valid: np.ndarray | None = None) -> float | None:
     return float(1.0 / np.median(dt[ok])) if ok.any() else None
 
 
-def analyse(
-    columns: dict[str, np.ndarray], settings: KinematicsSettings | None = None
-) -> dict[str, Any]:
-    """Kinematics of a run from poses.csv columns (read_poses); a JSON-ready dict (no NaN)."""
-    settings = settings or KinematicsSettings()
+def _series(columns: dict[str, np.ndarray], settings: KinematicsSettings) -> dict[str, np.ndarray]:
+    """Time, positions, raw and analysed speed (m/s), analysed angular speed (deg/s)."""
     missing = [c for c in ("timestamp", "tx", "ty", "tz") if c not in columns]
     if missing:
         raise InputError(f"pose columns lack {', '.join(missing)}; give a poses.csv / truth.csv")
@@ -537,6 +534,7 @@ def analyse(
         raise InputError(f"pose columns differ in length ({len(t)} timestamps, {len(p)} rows)")
     valid = _position_valid(t, p)
     velocity = velocity_profile(t, p, _column(columns, ("vx", "vy", "vz")))
+    raw_speed = np.linalg.norm(velocity, axis=1)
     q = _column(columns, ("qw", "qx", "qy", "qz"))
     omega = (
         angular_velocity_profile(t, q, _column(columns, ("wx", "wy", "wz")))
@@ -549,8 +547,35 @@ def analyse(
         velocity = lowpass(t, velocity, settings.lowpass_hz)
         omega = lowpass(t, omega, settings.lowpass_hz)
         p = lowpass(t, p, settings.lowpass_hz)
-    speed = np.linalg.norm(velocity, axis=1)
-    rate = np.degrees(np.linalg.norm(omega, axis=1))
+    return {
+        "t": t,
+        "valid": valid,
+        "p": p,
+        "raw_speed": raw_speed,
+        "speed": np.linalg.norm(velocity, axis=1),
+        "angular_speed": np.degrees(np.linalg.norm(omega, axis=1)),
+    }
+
+
+def speed_series(
+    columns: dict[str, np.ndarray], settings: KinematicsSettings | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(as tracked, as analysed) wrist speed (N,), m/s, of poses.csv columns: |v| (differences
+    of the positions where v is unknown), and that after the low-pass, the speed
+    :func:`analyse` segments and measures the reaches on."""
+    series = _series(columns, settings or KinematicsSettings())
+    return series["raw_speed"], series["speed"]
+
+
+def analyse(
+    columns: dict[str, np.ndarray], settings: KinematicsSettings | None = None
+) -> dict[str, Any]:
+    """Kinematics of a run from poses.csv columns (read_poses); a JSON-ready dict (no NaN)."""
+    settings = settings or KinematicsSettings()
+    series = _series(columns, settings)
+    t, p, valid, speed, rate = (
+        series[k] for k in ("t", "p", "valid", "speed", "angular_speed")
+    )
     angles = _column(columns, _ANGLE_COLUMNS)
     fs = frame_rate(t, valid)
     reaches = []
@@ -695,6 +720,7 @@ __all__ = [
     "read_kinematic_columns",
     "segment_reaches",
     "sparc",
+    "speed_series",
     "speed_profile",
     "velocity_profile",
 ]
