@@ -141,9 +141,11 @@ def test_frames_are_read_lazily(tmp_path):
     (folder / "rgb" / "000002.png").write_bytes(b"not a png")  # damaged after opening
     frames = iter(rec)
     assert next(frames).index == 0 and next(frames).index == 1
-    with pytest.raises(InputError) as err:
-        next(frames)
-    one_line(err, "000002.png", "corrupt or truncated")
+    bad = next(frames)  # a damaged frame is yielded as bad, and reading goes on
+    assert bad.index == 2 and not bad.ok and bad.bgr.size == 0
+    assert "\n" not in bad.error
+    assert "000002.png" in bad.error and "corrupt or truncated" in bad.error
+    assert next(frames).ok
 
 
 def test_writer_leaves_a_valid_folder_when_interrupted(tmp_path):
@@ -257,15 +259,28 @@ BAD_READ = {
 
 
 @pytest.mark.parametrize("case", BAD_READ)
-def test_bad_image_fails_while_reading_with_one_line(tmp_path, case):
+def test_bad_image_is_a_bad_frame_with_one_line(tmp_path, case):
     spoil, needles = BAD_READ[case]
     folder = write_folder(tmp_path / "rec")
     spoil(folder)
-    frames = iter(open_recording(folder))
-    assert next(frames).index == 0
+    frames = list(open_recording(folder))
+    assert [f.ok for f in frames] == [True, False, True]
+    error = frames[1].error
+    assert "\n" not in error and all(n in error for n in needles), error
+
+
+@pytest.mark.parametrize("case", BAD_READ)
+def test_bad_first_frames_fail_at_open_with_one_line(tmp_path, case):
+    # every probed frame bad: the recording, not a frame, is at fault
+    spoil, needles = BAD_READ[case]
+    folder = write_folder(tmp_path / "rec", n=3)
+    spoil(folder)
+    for sub in ("rgb", "depth"):  # frames 0 and 2 spoiled the same way
+        for i in (0, 2):
+            shutil.copy(folder / sub / "000001.png", folder / sub / f"{i:06d}.png")
     with pytest.raises(InputError) as err:
-        next(frames)
-    one_line(err, *needles)
+        open_recording(folder)
+    one_line(err, *[n.replace("000001", "000000") for n in needles])
 
 
 def test_grayscale_colour_is_converted(tmp_path):

@@ -14,7 +14,9 @@ class Detections:
     """Unordered blob centres of one frame.
 
     ``uv`` is (M, 2) pixels; ``depth`` is (M,) metres along the camera z axis with NaN where the
-    sensor gave no reading, or None when the recording has no depth at all.
+    sensor gave no reading, or None when the recording has no depth at all. A depth that cannot
+    be a reading (zero, negative, infinite) is taken as NaN; a non-finite centre is an
+    InputError.
     """
 
     timestamp: float
@@ -31,7 +33,16 @@ class Detections:
                     f"detections at t={self.timestamp}: {uv.shape[0]} blobs but {depth.shape[0]} "
                     "depths; give one depth per blob (NaN where unknown)"
                 )
+            with np.errstate(invalid="ignore"):
+                valid = np.isfinite(depth) & (depth > 0)
+            if not valid.all():
+                depth = np.where(valid, depth, np.nan)
             object.__setattr__(self, "depth", depth)
+        if not np.isfinite(uv).all():
+            raise InputError(
+                f"detections at t={self.timestamp}: blob centres must be finite pixel positions, "
+                f"got {uv[~np.isfinite(uv).all(axis=1)][:3].tolist()}"
+            )
         if not np.isfinite(self.timestamp):
             raise InputError(f"detections timestamp {self.timestamp} is not a finite number")
 

@@ -7,8 +7,11 @@ registered to the colour image, 0 = no reading; optional ``hand.json``.
 
 Every reader is a generator of :class:`Frame` holding one frame at a time, so memory does not grow
 with the length of the recording. Problems with the input are one-line InputError/ConfigError
-messages naming the file and saying how to fix it. Timestamps are passed through as given: a
-non-increasing timestamp is the tracker's to report, not the reader's.
+messages naming the file and saying how to fix it. A problem with the recording as a whole
+(missing files, wrong camera.json, a first frame that cannot be used) is raised when it is
+opened; a problem confined to one frame (a corrupt PNG in the middle) is not raised but yielded
+as a bad frame (``Frame.error`` set, no image) so a long run can note it and go on. Timestamps
+are passed through as given: a non-increasing timestamp is the tracker's to report.
 """
 
 from __future__ import annotations
@@ -33,6 +36,11 @@ VIDEO_SUFFIXES = frozenset(
     ".mp4 .m4v .avi .mov .mkv .webm .mpg .mpeg .wmv .flv .ogv .mjpeg .mjpg .h264 .ts".split()
 )
 LIVE_PREFIX = "live:"
+PROBE_FRAMES = 3  # frames read at opening; if none is usable the recording is refused
+
+
+_NO_IMAGE = np.zeros((0, 0, 3), np.uint8)
+_NO_IMAGE.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -40,12 +48,24 @@ class Frame:
     """One frame: colour as OpenCV BGR uint8 (H,W,3); depth raw uint16 (H,W) or None.
 
     ``timestamp`` is in seconds; metres of depth = raw * camera.depth_scale (0 = no reading).
+    A bad frame (unreadable, wrong size, ...) has ``error`` set to a one-line message and an
+    empty (0,0,3) image: skip it. ``timestamp`` is then the listed one, or NaN if unknown.
     """
 
     index: int
     timestamp: float
     bgr: np.ndarray
     depth: np.ndarray | None = None
+    error: str | None = None
+
+    @classmethod
+    def bad(cls, index: int, timestamp: float, error: str) -> Frame:
+        """A frame that could not be read: its place in the recording and why."""
+        return cls(index, timestamp, _NO_IMAGE, None, error)
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
 
 
 class Recording:
@@ -65,14 +85,20 @@ class Recording:
         self._active: list[Generator[Frame, None, None]] = []
 
     def __iter__(self) -> Iterator[Frame]:
-        frames = self._frames()
+        return self.frames()
+
+    def frames(self, start: int = 0) -> Iterator[Frame]:
+        """Frames from index ``start`` on (``--resume``). Readers skip the frames before it
+        without decoding them where the format allows (a recording folder, a bag); a video
+        decodes its way forward; a live camera cannot start part-way."""
+        frames = self._frames(start) if start else self._frames()
         # Keep unfinished iterations so close() can release what they hold.
         self._active = [g for g in self._active if g.gi_frame is not None]
         self._active.append(frames)
         return frames
 
-    def _frames(self) -> Generator[Frame, None, None]:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def _frames(self, start: int = 0) -> Generator[Frame, None, None]:  # pragma: no cover
+        raise NotImplementedError  # abstract
 
     def __len__(self) -> int:  # pragma: no cover - abstract
         raise TypeError(f"{type(self).__name__} has no known length")
@@ -113,13 +139,35 @@ def read_png(path: Path, what: str) -> np.ndarray:
         data = np.fromfile(path, dtype=np.uint8)  # imdecode also handles non-ASCII paths
     except OSError as e:
         raise InputError(f"{what} {path} cannot be read ({e.strerror}); restore the file") from None
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    image = _quiet_imdecode(data) if data.size and not _truncated_png(data) else None
     if image is None:
         raise InputError(
             f"{what} {path} is not a readable image (corrupt or truncated); restore or re-export "
             "it, or remove its row from frames.csv"
         )
     return image
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _truncated_png(data: np.ndarray) -> bool:
+    """A PNG that does not end with its IEND chunk was cut short (an interrupted copy): refuse
+    it before libpng, which would print its own error line to stderr. (Looked for near the end,
+    not at it: some tools append bytes after IEND, which decoders ignore.)"""
+    return data[:8].tobytes() == _PNG_SIGNATURE and b"IEND" not in data[-4096:].tobytes()
+
+
+def _quiet_imdecode(data: np.ndarray) -> np.ndarray | None:
+    """cv2.imdecode without OpenCV's own warning line for a damaged file: the caller reports
+    the problem as one line of its own."""
+    logging = cv2.utils.logging
+    level = logging.getLogLevel()
+    logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+    try:
+        return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    finally:
+        logging.setLogLevel(level)
 
 
 def as_bgr(image: np.ndarray, where: str) -> np.ndarray:
@@ -212,8 +260,9 @@ class FolderRecording(Recording):
             self.has_depth |= row.depth is not None
             for path, what in ((row.rgb, "rgb"), (row.depth, "depth")):
                 if path is not None and not path.is_file():
+                    problem = "is not a file" if path.exists() else "not found"
                     raise InputError(
-                        f"{self.frames_csv} line {row.line}: {what} image {path} not found; "
+                        f"{self.frames_csv} line {row.line}: {what} image {path} {problem}; "
                         "restore it or remove that row"
                     )
         if self._length == 0:
@@ -221,6 +270,28 @@ class FolderRecording(Recording):
                 f"{self.frames_csv} lists no frames; the recording is empty (record or copy "
                 "frames into it)"
             )
+        self._probe()
+
+    def _probe(self) -> None:
+        """Read the first frames now: if none of them can be used the fault is the recording's
+        (8-bit depth, a camera.json of another resolution), not one frame's, so say so at once
+        instead of reporting every frame of a long run as bad."""
+        first_error = None
+        for _, row in zip(range(PROBE_FRAMES), self._rows(), strict=False):
+            try:
+                self._read(row)
+                return
+            except InputError as e:
+                first_error = first_error or e
+        raise first_error
+
+    def _read(self, row: _Row) -> tuple[np.ndarray, np.ndarray | None]:
+        bgr = as_bgr(read_png(row.rgb, "colour image"), f"colour image {row.rgb}")
+        self.check_size(bgr, f"colour image {row.rgb}")
+        depth = None
+        if row.depth is not None:
+            depth = check_depth(read_png(row.depth, "depth image"), bgr, f"depth image {row.depth}")
+        return bgr, depth
 
     def __len__(self) -> int:
         return self._length
@@ -268,15 +339,15 @@ class FolderRecording(Recording):
             raise InputError(f"{where}: the rgb cell is empty; give the colour image path")
         return _Row(line, timestamp, self.folder / rgb, self.folder / depth if depth else None)
 
-    def _frames(self) -> Iterator[Frame]:
+    def _frames(self, start: int = 0) -> Iterator[Frame]:
         for index, row in enumerate(self._rows()):
-            bgr = as_bgr(read_png(row.rgb, "colour image"), f"colour image {row.rgb}")
-            self.check_size(bgr, f"colour image {row.rgb}")
-            depth = None
-            if row.depth is not None:
-                depth = check_depth(
-                    read_png(row.depth, "depth image"), bgr, f"depth image {row.depth}"
-                )
+            if index < start:  # resuming: the index row is enough, the images are not read
+                continue
+            try:
+                bgr, depth = self._read(row)
+            except InputError as e:  # this frame only: the caller notes it and goes on
+                yield Frame.bad(index, row.timestamp, str(e))
+                continue
             yield Frame(index, row.timestamp, bgr, depth)
 
 

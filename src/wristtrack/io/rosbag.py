@@ -19,6 +19,7 @@ never the recording.
 
 from __future__ import annotations
 
+import math
 import re
 import statistics
 import struct
@@ -86,6 +87,7 @@ class _Msg(NamedTuple):
     stamp: int  # ns
     msgtype: str
     msg: Any
+    error: str | None = None  # the message could not be deserialised (msg is None)
 
 
 # ------------------------------------------------------------------------------ topic choice
@@ -193,6 +195,8 @@ def _raw_array(msg: Any, where: str) -> tuple[str, np.ndarray]:
 
 def decode_colour(m: _Msg, where: str) -> np.ndarray:
     """BGR uint8 (H,W,3) of an Image (rgb8, bgr8, mono8, rgba8, bgra8, bayer) or CompressedImage."""
+    if m.error:
+        raise InputError(m.error)
     if m.msgtype == COMPRESSED:
         image = cv2.imdecode(np.asarray(m.msg.data, dtype=np.uint8), cv2.IMREAD_COLOR)
         if image is None:
@@ -228,6 +232,8 @@ def _depth_units(metres: np.ndarray, depth_scale: float) -> np.ndarray:
 
 def decode_depth(m: _Msg, depth_scale: float, where: str) -> np.ndarray:
     """Raw uint16 depth (H,W) in units of ``depth_scale`` metres from 16UC1 (mm) or 32FC1 (m)."""
+    if m.error:
+        raise InputError(m.error)
     if m.msgtype == COMPRESSED:
         return _decode_compressed_depth(m.msg, depth_scale, where)
     enc, image = _raw_array(m.msg, where)
@@ -431,17 +437,22 @@ class BagRecording(Recording):
             for conn, log_time, raw in messages:
                 try:
                     msg = reader.deserialize(raw, conn.msgtype)
-                except Exception as e:
-                    raise InputError(
-                        f"{self.where}: a message on {conn.topic} cannot be decoded ({e}); the "
-                        "bag is damaged"
-                    ) from None
+                except Exception as e:  # one damaged message: its frame is reported as bad
+                    error = (
+                        f"{self.where}: a message on {conn.topic} at {int(log_time)} ns cannot "
+                        f"be decoded ({type(e).__name__}: {e}); the bag is damaged there"
+                    )
+                    error = " ".join(error.split())  # one line, whatever the library said
+                    yield conn.topic, _Msg(int(log_time), conn.msgtype, None, error)
+                    continue
                 stamp = _stamp_ns(msg, log_time) if hasattr(msg, "header") else int(log_time)
                 yield conn.topic, _Msg(stamp, conn.msgtype, msg)
 
     def _first(self, reader: Any, topic: str) -> _Msg:
         with closing(self._messages(reader, [topic])) as messages:
             for _, m in messages:
+                if m.error:
+                    raise InputError(m.error)
                 return m
         raise ConfigError(
             f"{self.where}: topic {topic} has no messages; pass --camera camera.json"
@@ -465,7 +476,7 @@ class BagRecording(Recording):
 
     # ------------------------------------------------------------------------------ frames
 
-    def _frames(self) -> Iterator[Frame]:
+    def _frames(self, start: int = 0) -> Iterator[Frame]:
         tol = round(self.sync_tolerance * 1e9)
         topics = [self.color_topic] + ([self.depth_topic] if self.depth_topic else [])
         pending: deque[_Msg] = deque()  # colour frames waiting for their depth
@@ -473,8 +484,9 @@ class BagRecording(Recording):
         newest_depth: int | None = None
         last_colour: int | None = None
         index = 0
+        failure: list[str] = []
         with self._reader() as reader, closing(self._messages(reader, topics)) as messages:
-            for topic, m in messages:
+            for topic, m in _until_damaged(messages, failure):
                 if topic == self.color_topic:
                     pending.append(m)
                 else:
@@ -489,7 +501,8 @@ class BagRecording(Recording):
                 ):
                     c = pending.popleft()
                     last_colour = c.stamp
-                    yield self._frame(index, c, depths, tol)
+                    if index >= start:  # resuming: frames before start are paired, not decoded
+                        yield self._frame(index, c, depths, tol)
                     index += 1
                 reference = pending[0].stamp if pending else last_colour
                 while depths and (
@@ -498,17 +511,47 @@ class BagRecording(Recording):
                 ):
                     depths.popleft()
             while pending:
-                yield self._frame(index, pending.popleft(), depths, tol)
+                c = pending.popleft()
+                if index >= start:
+                    yield self._frame(index, c, depths, tol)
                 index += 1
+            if failure:
+                after = (last_colour - self._t0) / 1e9 if last_colour is not None else math.nan
+                yield Frame.bad(
+                    index, after,
+                    f"{self.where} cannot be read past {after:.3f} s ({failure[0]}); the rest of "
+                    "the recording is missing (for a ROS 1 bag try rosbag reindex)",
+                )
 
     def _frame(self, index: int, c: _Msg, depths: deque[_Msg], tol: int) -> Frame:
         where = f"{self.where} topic {self.color_topic} frame {index}"
-        bgr = decode_colour(c, where)
-        self.check_size(bgr, where)
-        depth = None
-        if depths:
-            best = min(depths, key=lambda d: abs(d.stamp - c.stamp))
-            if abs(best.stamp - c.stamp) <= tol:
-                where = f"{self.where} topic {self.depth_topic} (for frame {index})"
-                depth = check_depth(decode_depth(best, self.camera.depth_scale, where), bgr, where)
-        return Frame(index, (c.stamp - self._t0) / 1e9, bgr, depth)
+        timestamp = (c.stamp - self._t0) / 1e9
+        try:
+            bgr = decode_colour(c, where)
+            self.check_size(bgr, where)
+            depth = None
+            if depths:
+                best = min(depths, key=lambda d: abs(d.stamp - c.stamp))
+                if abs(best.stamp - c.stamp) <= tol:
+                    where = f"{self.where} topic {self.depth_topic} (for frame {index})"
+                    raw = decode_depth(best, self.camera.depth_scale, where)
+                    depth = check_depth(raw, bgr, where)
+        except InputError as e:  # this frame only: the caller notes it and goes on
+            return Frame.bad(index, timestamp, str(e))
+        return Frame(index, timestamp, bgr, depth)
+
+
+def _until_damaged(messages: Iterator, failure: list[str]) -> Iterator:
+    """The messages until the bag reader itself fails (a damaged chunk, a truncated file);
+    the failure, one line, goes into ``failure`` instead of ending the run with a traceback."""
+    while True:
+        try:
+            item = next(messages)
+        except StopIteration:
+            return
+        except InputError:
+            raise
+        except Exception as e:  # rosbags raises several types for damaged files
+            failure.append(" ".join(f"{type(e).__name__}: {e}".split()))
+            return
+        yield item

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import math
+import os
+import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -13,12 +16,41 @@ from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
 from wristtrack.io.recording import Frame, Recording, as_bgr, reject_options
 
+# FFmpeg logs every damaged packet to stderr; the reader reports problems as one line itself.
+# (setdefault: a user who sets the variable keeps their choice.)
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+# A container whose stated frame count is estimated (from duration x rate) may be off by one.
+COUNT_SLACK = 1
+
+
+@contextmanager
+def _native_stderr_silenced() -> Iterator[None]:
+    """Silence file descriptor 2 while OpenCV probes a file: some of its container parsers
+    print straight to stderr when a file is damaged, which would add lines to our one-line
+    error. Python's own sys.stderr is flushed first and works again afterwards."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable fd 2 (e.g. a closed or replaced stream)
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
 
 class VideoRecording(Recording):
     """Frames of a video file decoded one at a time by ``cv2.VideoCapture``.
 
     Timestamps are the decoder's presentation times (CAP_PROP_POS_MSEC) where it gives them,
-    else frame index / frame rate (``fps`` overrides the file's rate for that fallback).
+    else frame index / frame rate (``fps`` overrides the file's rate for that fallback). A video
+    that stops decoding before the frame count its container states (truncated, damaged) ends
+    with one bad frame saying so; a frame of another size is a bad frame.
     """
 
     kind = "video"
@@ -60,12 +92,14 @@ class VideoRecording(Recording):
         self.fps = float(rate) if rate and math.isfinite(rate) and rate > 0 else None
 
     def _open(self) -> cv2.VideoCapture:
-        cap = cv2.VideoCapture(str(self.path))
+        with _native_stderr_silenced():
+            cap = cv2.VideoCapture(str(self.path))
         if not cap.isOpened():
             cap.release()
             raise InputError(
-                f"video {self.path} cannot be opened by OpenCV (unsupported container or codec); "
-                "re-encode it, e.g. ffmpeg -i IN -c:v mjpeg OUT.avi"
+                f"video {self.path} cannot be opened by OpenCV (damaged or truncated file, or an "
+                "unsupported container or codec); re-encode it, e.g. ffmpeg -i IN -c:v mjpeg "
+                "OUT.avi"
             )
         return cap
 
@@ -87,18 +121,40 @@ class VideoRecording(Recording):
             )
         return index / self.fps
 
-    def _frames(self) -> Iterator[Frame]:
+    def _frames(self, start: int = 0) -> Iterator[Frame]:
         cap = self._open()
         try:
             index = 0
+            last = -math.inf
+            while index < start and cap.grab():  # resuming: decode forward, convert nothing
+                last = self._timestamp(cap, index)
+                index += 1
             while True:
                 ok, image = cap.read()
                 if not ok or image is None:
+                    if index < self._count - COUNT_SLACK:
+                        yield self._truncated(index, last)
                     return
                 where = f"video {self.path} frame {index}"
-                bgr = as_bgr(image, where)
-                self.check_size(bgr, where)
-                yield Frame(index, self._timestamp(cap, index), bgr, None)
+                timestamp = self._timestamp(cap, index)
+                try:
+                    bgr = as_bgr(image, where)
+                    self.check_size(bgr, where)
+                except InputError as e:  # this frame only: the caller notes it and goes on
+                    yield Frame.bad(index, timestamp, str(e))
+                else:
+                    yield Frame(index, timestamp, bgr, None)
+                last = timestamp
                 index += 1
         finally:
             cap.release()
+
+    def _truncated(self, index: int, last: float) -> Frame:
+        step = 1.0 / self.fps if self.fps else math.nan
+        timestamp = last + step if math.isfinite(last) else math.nan
+        return Frame.bad(
+            index, timestamp,
+            f"video {self.path} stops decoding at frame {index} of the {self._count} its "
+            "container states (truncated or damaged); the rest of the video is missing, "
+            "re-copy or re-export the file to track it",
+        )
