@@ -127,6 +127,10 @@ def test_a_recording_whose_first_frames_are_all_bad_fails_at_once(rec, capsys, t
      '"depth_scale": 0.001}', ["camera.json", "'fx'", "positive"]),
     ('{"fx": 525, "fy": 525, "cx": 320, "cy": 240, "width": 640.5, "height": 480, '
      '"depth_scale": 0.001}', ["camera.json", "'width'", "integer"]),
+    ('{"fx": 525, "fy": 525, "cx": 240, "cy": 520, "width": 640, "height": 480, '
+     '"depth_scale": 0.001}', ["camera.json", "principal point", "outside the 640x480 image"]),
+    ('{"fx": 525, "fy": 525, "cx": 320, "cy": 240, "width": 640, "height": 480, '
+     '"depth_scale": 1000}', ["camera.json", "'depth_scale'", "metres per unit"]),
 ])
 def test_bad_camera_file(rec, capsys, tmp_path, content, needles):
     (rec / "camera.json").write_text(content)

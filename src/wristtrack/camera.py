@@ -19,6 +19,9 @@ from wristtrack.jsonfile import read_config, write_config
 
 REQUIRED_FIELDS = ("fx", "fy", "cx", "cy", "width", "height", "depth_scale")
 DIST_LENGTHS = (4, 5, 8)
+# Coarsest plausible depth unit (1 cm): 16-bit depth then reaches 655 m. Larger values are
+# inverted units (1000 for millimetres) and would make every depth reading absurd.
+MAX_DEPTH_SCALE = 0.01
 
 # Newton iterations for undistortion; it converges quadratically, a handful is normally enough.
 _UNDISTORT_MAX_ITER = 30
@@ -82,6 +85,17 @@ class Camera:
             value = _check_number(d[field], field, where, positive=True, integer=True)
             object.__setattr__(self, field, value)
         object.__setattr__(self, "dist", _check_dist(d.get("dist"), where))
+        if not (0.0 <= self.cx <= self.width and 0.0 <= self.cy <= self.height):
+            raise ConfigError(
+                f"{where}: principal point ('cx', 'cy') = ({self.cx:g}, {self.cy:g}) lies outside "
+                f"the {self.width}x{self.height} image; the calibration is for another resolution "
+                "or cx and cy are swapped"
+            )
+        if self.depth_scale > MAX_DEPTH_SCALE:
+            raise ConfigError(
+                f"{where}: field 'depth_scale' is {self.depth_scale:g} m per depth unit (at most "
+                f"{MAX_DEPTH_SCALE:g}); it is metres per unit, e.g. 0.001 for millimetre depth"
+            )
 
     # ------------------------------------------------------------------------------ properties
 
