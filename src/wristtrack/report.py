@@ -190,7 +190,8 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     if settings:
         rows.append(("Tracker", f"model {settings.get('model', '?')}, association "
                                 f"{settings.get('association', '?')}, depth in updates "
-                                f"{'yes' if settings.get('use_depth') else 'no'}"))
+                                f"{'yes' if settings.get('use_depth') else 'no'}"
+                                f"{', RTS-smoothed' if settings.get('smoothed') else ''}"))
     conventions = summary.get("conventions") or {}
     labels = {"angles": "Angle sequence and signs", "side": "Side", "neutral": "Neutral posture",
               "hand_frame": "Hand frame", "units": "Units", "velocities": "Velocities"}
