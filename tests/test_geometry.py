@@ -13,6 +13,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 from wristtrack import geometry as g
+from wristtrack.hand import HandLayout
 
 TAIT_BRYAN = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]
 PROPER = ["XYX", "XZX", "YXY", "YZY", "ZXZ", "ZYZ"]
@@ -297,28 +298,51 @@ def test_sequence_constants():
 
 
 def test_wrist_angles_against_scipy(rng):
+    """The raw intrinsic Y-Z-X decomposition (left-hand signs) against SciPy; a right hand's
+    deviation and pronation are the same angles negated."""
     n = 200
-    dev = rng.uniform(-0.6, 0.6, n)
-    flex = rng.uniform(-1.4, 1.4, n)
-    pron = rng.uniform(-3.0, 3.0, n)
-    R = Rotation.from_euler("YZX", np.column_stack([flex, dev, pron])).as_matrix()
-    got = g.wrist_angles(R.reshape(10, 20, 3, 3))
+    a_z = rng.uniform(-0.6, 0.6, n)
+    a_y = rng.uniform(-1.4, 1.4, n)
+    a_x = rng.uniform(-3.0, 3.0, n)
+    R = Rotation.from_euler("YZX", np.column_stack([a_y, a_z, a_x])).as_matrix()
+    got = g.wrist_angles(R.reshape(10, 20, 3, 3), "left")
     assert got.shape == (10, 20, 3)
-    np.testing.assert_allclose(got.reshape(n, 3), np.column_stack([dev, flex, pron]), atol=1e-13)
-    np.testing.assert_allclose(g.matrix_from_wrist_angles(dev, flex, pron), R, atol=1e-15)
+    np.testing.assert_allclose(got.reshape(n, 3), np.column_stack([a_z, a_y, a_x]), atol=1e-13)
+    right = g.wrist_angles(R, "right")
+    np.testing.assert_allclose(right, np.column_stack([-a_z, a_y, -a_x]), atol=1e-13)
+    for side in g.HAND_SIDES:
+        dev, flex, pron = g.wrist_angles(R, side).T
+        np.testing.assert_allclose(g.matrix_from_wrist_angles(dev, flex, pron, side), R,
+                                   atol=1e-14)
 
 
-def test_wrist_angles_single_axis_signs():
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_wrist_angle_signs_mean_the_same_on_both_hands(side):
+    """ISB signs from the anatomy of the layout itself: ulnar deviation turns the fingers
+    towards the little finger (MCP5), palmar flexion towards the palm (-Z), pronation turns
+    the thumb (CMC1) towards the palm."""
+    layout = HandLayout.default() if side == "right" else HandLayout.default().mirrored()
+    assert layout.side == side
+    thumb_y, little_y = layout.marker("CMC1")[1], layout.marker("MCP5")[1]
     a = 0.4
-    c, s = np.cos(a), np.sin(a)
-    Ry = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    Rx = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-    np.testing.assert_allclose(g.wrist_angles(Ry), [0, a, 0], atol=1e-15)  # flexion about Y
-    np.testing.assert_allclose(g.wrist_angles(Rz), [a, 0, 0], atol=1e-15)  # deviation about Z
-    np.testing.assert_allclose(g.wrist_angles(Rx), [0, 0, a], atol=1e-15)  # pronation about X
+    ulnar = Rotation.from_rotvec([0, 0, np.sign(little_y) * a]).as_matrix()
+    palmar = Rotation.from_rotvec([0, a, 0]).as_matrix()
+    pronation = Rotation.from_rotvec([-np.sign(thumb_y) * a, 0, 0]).as_matrix()
+    assert (ulnar @ [1, 0, 0])[1] * little_y > 0  # fingers towards the little finger
+    assert (palmar @ [1, 0, 0])[2] < 0  # fingers towards the palm
+    assert (pronation @ layout.marker("CMC1"))[2] < 0  # thumb towards the palm
+    np.testing.assert_allclose(g.wrist_angles(ulnar, side), [a, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(g.wrist_angles(palmar, side), [0, a, 0], atol=1e-15)
+    np.testing.assert_allclose(g.wrist_angles(pronation, side), [0, 0, a], atol=1e-15)
     # Order of composition: flexion first (outermost), then deviation, then pronation.
-    np.testing.assert_allclose(g.matrix_from_wrist_angles(a, a, a), Ry @ Rz @ Rx, atol=1e-15)
+    np.testing.assert_allclose(
+        g.matrix_from_wrist_angles(a, a, a, side), palmar @ ulnar @ pronation, atol=1e-15
+    )
+
+
+def test_unknown_side_is_refused():
+    with pytest.raises(ValueError, match="hand side"):
+        g.wrist_angles(np.eye(3), "up")
 
 
 def test_matrix_from_wrist_angles_broadcasts():

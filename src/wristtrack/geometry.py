@@ -392,19 +392,43 @@ def euler_from_matrix(R: np.ndarray, seq: str) -> np.ndarray:
 # ---------------------------------------------------------------------------------- wrist angles
 
 
-def wrist_angles(R_rel: np.ndarray) -> np.ndarray:
+# Signs that turn the Y-Z-X decomposition's (about Z, about Y, about X) angles into the ISB's
+# (ulnar +, flexion +, pronation +). The hand axes are the same for both hands (+Y = Z x X), so
+# +Y points to the thumb of a right hand and to the little finger of a left one: a positive turn
+# about +Z is radial deviation on a right hand, and a positive turn about the distal +X lifts the
+# thumb of a right hand, i.e. supinates it. The right hand's two angles are therefore negated.
+HAND_SIDES = ("right", "left")
+_SIDE_SIGNS = {"right": np.array([-1.0, 1.0, -1.0]), "left": np.array([1.0, 1.0, 1.0])}
+
+
+def _side_signs(side: str) -> np.ndarray:
+    try:
+        return _SIDE_SIGNS[side]
+    except KeyError:
+        raise ValueError(f"unknown hand side {side!r}; choose 'right' or 'left'") from None
+
+
+def wrist_angles(R_rel: np.ndarray, side: str = "right") -> np.ndarray:
     """ISB wrist angles (deviation, flexion, pronation) (...,3), radians, of R_rel (...,3,3).
 
-    R_rel = Ry(flexion) @ Rz(deviation) @ Rx(pronation) (intrinsic Y-Z-X in hand axes,
-    DESIGN.md section 2). Note the output ORDER differs from the rotation order.
+    The intrinsic Y-Z-X decomposition in hand axes (DESIGN.md section 2),
+    R_rel = Ry(a_y) @ Rz(a_z) @ Rx(a_x), signed as the ISB recommends for either hand:
+    flexion(+)/extension(-), ulnar(+)/radial(-) deviation, pronation(+)/supination(-).
+    For a right hand deviation = -a_z and pronation = -a_x; for a left hand the angles are
+    a_z and a_x as they are (see _SIDE_SIGNS). Note the output ORDER differs from the rotation
+    order.
     """
-    flex, dev, pron = np.moveaxis(euler_from_matrix(R_rel, ISB_WRIST_SEQUENCE), -1, 0)
-    return np.stack([dev, flex, pron], -1)
+    a_y, a_z, a_x = np.moveaxis(euler_from_matrix(R_rel, ISB_WRIST_SEQUENCE), -1, 0)
+    return np.stack([a_z, a_y, a_x], -1) * _side_signs(side)
 
 
 def matrix_from_wrist_angles(
-    deviation: np.ndarray | float, flexion: np.ndarray | float, pronation: np.ndarray | float
+    deviation: np.ndarray | float,
+    flexion: np.ndarray | float,
+    pronation: np.ndarray | float,
+    side: str = "right",
 ) -> np.ndarray:
-    """Inverse of :func:`wrist_angles`: Ry(flexion) @ Rz(deviation) @ Rx(pronation), (...,3,3)."""
+    """Inverse of :func:`wrist_angles` for the same ``side``, (...,3,3)."""
     dev, flex, pron = np.broadcast_arrays(_f64(deviation), _f64(flexion), _f64(pronation))
-    return matrix_from_euler(np.stack([flex, dev, pron], -1), ISB_WRIST_SEQUENCE)
+    s_dev, _, s_pron = _side_signs(side)
+    return matrix_from_euler(np.stack([flex, s_dev * dev, s_pron * pron], -1), ISB_WRIST_SEQUENCE)

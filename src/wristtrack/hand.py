@@ -116,6 +116,12 @@ class HandLayout:
         """(3,) position of one marker by name."""
         return self.points[MARKER_NAMES.index(name)]
 
+    @property
+    def side(self) -> str:
+        """'right' or 'left': which side of the hand frame the thumb (CMC1) is on. +Y = Z x X
+        points to the thumb of a right hand, so a layout with CMC1 at -Y is a left hand."""
+        return "right" if self.points[MARKER_NAMES.index("CMC1"), 1] >= 0 else "left"
+
     def mirrored(self) -> HandLayout:
         """The same layout mirrored across the XZ plane (left hand <-> right hand)."""
         return HandLayout(self.points * np.array([1.0, -1.0, 1.0]))

@@ -5,22 +5,13 @@ JSON-ready dict (:func:`analyse`) that goes into summary.json under ``"kinematic
 core is pure NumPy functions on arrays, also used by the report figures.
 
 Angles. ``deviation_deg``, ``flexion_deg`` and ``pronation_deg`` come from poses.csv as they are:
-:func:`wristtrack.geometry.wrist_angles`, the intrinsic Y-Z-X decomposition R = Ry(flexion)
-Rz(deviation) Rx(pronation) of the hand rotation relative to W0 (the neutral posture at
-initialisation), in the hand axes of DESIGN.md section 2 (+X wrist -> MCP3, +Z out of the back
-of the hand, +Y = Z x X). Each angle is a right-handed rotation about its hand axis, and the same
-formula is applied whatever the hand: nothing in wristtrack mirrors a left hand (there is no
-side setting; a left hand is tracked with a mirrored hand.json layout, whose thumb lies on -Y).
-What the signs therefore mean anatomically:
-
-    axis          right hand (thumb on +Y)          left hand (thumb on -Y)
-    flexion       + palmar flexion, - extension     + palmar flexion, - extension
-    deviation     + radial, - ulnar                 + ulnar, - radial
-    pronation     + supination, - pronation         + pronation, - supination
-
-(+Y points radially on a right hand, so a positive turn about +Z moves the fingers towards the
-thumb, and a positive turn about +X, the distal axis, lifts the thumb side towards the back of
-the hand: supination.) The ISB signs (ulnar +, pronation +) hold for a left hand only.
+:func:`wristtrack.geometry.wrist_angles`, the intrinsic Y-Z-X decomposition of the hand rotation
+relative to W0 (the neutral posture at initialisation) in the hand axes of DESIGN.md section 2
+(+X wrist -> MCP3, +Z out of the back of the hand, +Y = Z x X), signed as the ISB recommends on
+either hand: flexion(+)/extension(-), ulnar(+)/radial(-) deviation, pronation(+)/supination(-).
+The side comes from the hand layout (thumb marker CMC1 on +Y: right hand; on -Y: left hand); on
+a right hand +Y points to the thumb, so its deviation and pronation are the decomposition's Z and
+X angles negated, on a left hand they are taken as they are.
 
 Speeds. Linear speed is |v| from the tracker's filtered velocity (vx, vy, vz) where that is
 finite; elsewhere central differences of the positions (tx, ty, tz) within runs of valid rows.

@@ -37,6 +37,7 @@ def smooth_run(
     R_c0: np.ndarray,
     t_c0: np.ndarray,
     params: UKFParams = _DEFAULT_PARAMS,
+    side: str = "right",
 ) -> list[FrameResult]:
     """Smooth the run in ``out``; returns one FrameResult per tracked frame (smoothed where it
     has an estimate) for the summary. Removes the state file once poses.csv is rewritten."""
@@ -54,8 +55,9 @@ def smooth_run(
             "track the recording again with --smooth"
         )
     col = {name: j for j, name in enumerate(header)}
-    results = [_filtered_result(row, col, states, k, model, R_c0, t_c0) for k, row in
-               enumerate(body)]
+    results = [
+        _filtered_result(row, col, states, k, model, R_c0, t_c0, side) for k, row in enumerate(body)
+    ]
     tracked = [r for r in results if r is not None]
     smoothed = iter(smooth_results(model, tracked, params))
     out_rows = []
@@ -70,6 +72,7 @@ def smooth_run(
             row = pose_row(
                 s.frame, s.timestamp, str(s.status), s.R_ch, s.t_ch, s.R, s.p, s.v, s.w,
                 s.n_visible, s.n_clutter, s.pos_sigma_mm, s.rot_sigma_deg, s.nis, s.nis_dof,
+                s.side,
             ) + row[len(COLUMNS):]
         out_rows.append(row)
     tmp = out / "poses.csv.smoothing"
@@ -83,7 +86,7 @@ def smooth_run(
     return summary_results
 
 
-def _filtered_result(row, col, states, k, model, R_c0, t_c0) -> FrameResult | None:
+def _filtered_result(row, col, states, k, model, R_c0, t_c0, side) -> FrameResult | None:
     """The tracker's result for poses.csv row ``row``, rebuilt from the row and the state log;
     None for a row the tracker never saw (a skipped frame)."""
     status = _STATUSES.get(row[col["status"]])
@@ -101,7 +104,7 @@ def _filtered_result(row, col, states, k, model, R_c0, t_c0) -> FrameResult | No
         return FrameResult(
             int(row[col["frame"]]), timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3,
             _NAN3, None, np.empty(0, int), n_visible, n_clutter, nis,
-            0 if math.isnan(dof) else int(dof),
+            0 if math.isnan(dof) else int(dof), side=side,
         )
     x = states.x[k]
     R_all, p_all = model.pose(x[None])
@@ -111,5 +114,5 @@ def _filtered_result(row, col, states, k, model, R_c0, t_c0) -> FrameResult | No
         int(row[col["frame"]]), timestamp, status, R_c0 @ R, R_c0 @ p + t_c0, R, p,
         np.asarray(v), np.asarray(w), states.P[k], np.empty(0, int), n_visible, n_clutter, nis,
         0 if math.isnan(dof) else int(dof), number("pos_sigma_mm"), number("rot_sigma_deg"),
-        x, int(states.track_id[k]),
+        x, int(states.track_id[k]), side,
     )

@@ -20,9 +20,10 @@ CONVENTIONS = {
         f"ISB wrist (Wu et al. 2005): intrinsic {'-'.join(ISB_WRIST_SEQUENCE)} decomposition of "
         "the hand rotation relative to W0 in hand axes: flexion(+)/extension(-) about Y, then "
         "ulnar(+)/radial(-) deviation about the floating Z, then pronation(+)/supination(-) "
-        "about X"
+        "about X; for a right hand (thumb on +Y) the Z and X angles of the decomposition are "
+        "negated so that the signs mean the same on both hands"
     ),
-    "side": "right (a left hand is mirrored so the signs mean the same)",
+    "side": "right",
     "neutral": "W0 = the hand frame at the first initialisation (hand still, neutral posture)",
     "hand_frame": "origin WRIST marker; +X towards MCP3; +Z out of the back of the hand; Y = Z x X",
     "units": "metres, seconds, radians; *_deg columns and summary angles in degrees",
@@ -47,6 +48,7 @@ class SummaryAccumulator:
         self.speed_n = 0
         self.path = 0.0
         self._last_p: np.ndarray | None = None
+        self.side: str | None = None
 
     def add(self, result) -> None:
         """Account for one tracker.FrameResult."""
@@ -60,7 +62,8 @@ class SummaryAccumulator:
         if not result.has_estimate:
             self._last_p = None  # a gap: do not draw a line across it
             return
-        angles = np.degrees(wrist_angles(result.R))
+        self.side = getattr(result, "side", "right")
+        angles = np.degrees(wrist_angles(result.R, self.side))
         self.angle_min = np.minimum(self.angle_min, angles)
         self.angle_max = np.maximum(self.angle_max, angles)
         if np.isnan(self.angle_start).all():
@@ -89,7 +92,10 @@ class SummaryAccumulator:
             }
         return {
             "software": {"name": "wristtrack", "version": __version__},
-            "conventions": CONVENTIONS,
+            "conventions": {
+                **CONVENTIONS,
+                "side": self.side or "unknown (no frame was tracked)",
+            },
             "range_of_motion": rom,
             "peak_speed_m_s": self.peak_speed if self.speed_n else None,
             "mean_speed_m_s": self.speed_sum / self.speed_n if self.speed_n else None,

@@ -46,12 +46,14 @@ def pose_row(
     rot_sigma_deg: float = math.nan,
     nis: float = math.nan,
     nis_dof: int = 0,
+    side: str = "right",
 ) -> list[str]:
-    """The text cells of one poses.csv row; NaN poses give 'nan' cells throughout."""
+    """The text cells of one poses.csv row; NaN poses give 'nan' cells throughout. ``side``
+    (the hand's) signs the anatomical angles (geometry.wrist_angles)."""
     known = bool(np.all(np.isfinite(t_ch)) and np.all(np.isfinite(R_ch)))
     if known:
         q_cam, q_rel = quat_from_matrix(R_ch), quat_from_matrix(R)
-        angles = np.degrees(wrist_angles(R))
+        angles = np.degrees(wrist_angles(R, side))
     else:
         q_cam = q_rel = np.full(4, np.nan)
         angles = np.full(3, np.nan)
@@ -86,6 +88,7 @@ class PosesWriter:
                 result.frame, result.timestamp, str(result.status), result.R_ch, result.t_ch,
                 result.R, result.p, result.v, result.w, result.n_visible, result.n_clutter,
                 result.pos_sigma_mm, result.rot_sigma_deg, result.nis, result.nis_dof,
+                getattr(result, "side", "right"),
             )
         )
 
@@ -99,15 +102,16 @@ class PosesWriter:
         self.close()
 
 
-def write_truth(path: str | Path, trajectory) -> None:
-    """truth.csv of a simulated recording: the poses.csv columns from a sim Trajectory."""
+def write_truth(path: str | Path, trajectory, side: str = "right") -> None:
+    """truth.csv of a simulated recording: the poses.csv columns from a sim Trajectory of a
+    ``side`` hand."""
     with PosesWriter(path) as writer:
         for i in range(len(trajectory.t)):
             writer.write(
                 pose_row(
                     i, trajectory.t[i], "truth", trajectory.R_ch[i], trajectory.t_ch[i],
                     trajectory.R_rel[i], trajectory.p_rel[i], trajectory.v[i], trajectory.w[i],
-                    6, 0,
+                    6, 0, side=side,
                 )
             )
 
@@ -115,18 +119,21 @@ def write_truth(path: str | Path, trajectory) -> None:
 def read_poses(path: str | Path) -> dict[str, np.ndarray]:
     """Columns of a poses.csv / truth.csv as arrays (numbers as float, status as str).
 
-    A last line cut short by an interrupted run is dropped, not an error.
+    A last line cut short by an interrupted run is dropped, not an error: one without its
+    newline (every row is written whole with its newline, so a cut one lacks it) or with too
+    few cells.
     """
     path = Path(path)
     try:
         with open(path, newline="") as fh:
-            rows = list(csv.reader(fh))
+            text = fh.read()
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    rows = list(csv.reader(text.splitlines()))
     if not rows or rows[0][: len(CONTRACT_COLUMNS)] != list(CONTRACT_COLUMNS):
         raise InputError(f"{path} is not a poses.csv: its header lacks the contract's columns")
     header, body = rows[0], rows[1:]
-    if body and len(body[-1]) != len(header):
+    if body and (len(body[-1]) != len(header) or not text.endswith("\n")):
         body = body[:-1]
     bad = next((i for i, r in enumerate(body) if len(r) != len(header)), None)
     if bad is not None:

@@ -894,5 +894,5 @@ def render_recording(
                 pending.popleft().result()
         while pending:
             pending.popleft().result()
-    write_truth(out / "truth.csv", scene.trajectory())
+    write_truth(out / "truth.csv", scene.trajectory(), scene.layout.side)
     return out
