@@ -53,7 +53,7 @@ def pose_row(
     known = bool(np.all(np.isfinite(t_ch)) and np.all(np.isfinite(R_ch)))
     if known:
         q_cam, q_rel = quat_from_matrix(R_ch), quat_from_matrix(R)
-        angles = np.degrees(wrist_angles(R, side))
+        angles = np.degrees(wrist_angles(R, side)) + 0.0  # + 0.0: no "-0" from a sign flip
     else:
         q_cam = q_rel = np.full(4, np.nan)
         angles = np.full(3, np.nan)
