@@ -177,12 +177,13 @@ class BlockGate:
         density = 1.0 / (params.image_area * params.depth_range)
         # -score = m2 / 2 + log(det S_j) / 2 + (3/2) log(2 pi) + log(density)
         #          - log(P_D / ((1 - P_D) lambda_c)),   with log(det S_j) / 2 = sum log diag L_j
-        self._constant = (
+        # the parts of -score that do not depend on the blob (c_j without log det S_j / 2)
+        self.constant = (
             1.5 * math.log(2 * math.pi)
             + math.log(density)
             - math.log(params.p_detect / ((1 - params.p_detect) * params.clutter_rate))
         )
-        self._half_gate = 0.5 * _gate_limit(params.gate_prob, 3)
+        self.half_gate = 0.5 * _gate_limit(params.gate_prob, 3)  # on half squared distances
 
     def distances(self, S: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, list[float]] | None:
         """Half squared Mahalanobis distances (J, M) of every blob to every marker and each
@@ -195,7 +196,7 @@ class BlockGate:
         if info:
             return None
         W = dtrsm(math.sqrt(0.5), L, D, lower=1)  # L^-1 D / sqrt(2)
-        d, J, c = L.diagonal().tolist(), self.n_markers, self._constant
+        d, J, c = L.diagonal().tolist(), self.n_markers, self.constant
         return self._sum_blocks.dot(W * W), [
             math.log(d[j] * d[J + j] * d[2 * J + j]) + c for j in range(J)
         ]
@@ -209,7 +210,7 @@ class BlockGate:
         for any assignment) and the solver only runs when markers compete.
         """
         nearest = half_m2.argmin(axis=1).tolist()
-        rows, gate = half_m2.tolist(), self._half_gate
+        rows, gate = half_m2.tolist(), self.half_gate
         d = [row[b] for row, b in zip(rows, nearest, strict=True)]
         pairs = [
             (j, b)
@@ -225,7 +226,7 @@ class BlockGate:
         cost = half_m2 + np.array(constants)[:, None]
         # fmin, not minimum: a NaN cost (a NaN distance is never gated) becomes 0, not NaN
         np.fmin(cost, 0.0, out=cost)
-        cost *= half_m2 <= self._half_gate
+        cost *= half_m2 <= self.half_gate
         blobs, markers = linear_sum_assignment(cost.T)
         rows = cost.tolist()
         pairs = zip(markers.tolist(), blobs.tolist(), strict=True)

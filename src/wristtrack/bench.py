@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import scipy
 
-from wristtrack import __version__
+from wristtrack import __version__, fast_kernel
 from wristtrack.motion import ConstantRateModel
 from wristtrack.observation import MarkerObservation
 from wristtrack.sim.detections import NoiseModel, acceptance_noise, simulate_detections
@@ -235,8 +235,10 @@ def _summary(step: StepTiming, f: dict) -> list[str]:
         f"; {step.stonesoup_ms / step.ours_ms:.0f}x faster than the Stone Soup tracker's step "
         "(which also associates)" if step.stonesoup_ms else ""
     )
+    kind = "numba-compiled" if fast_kernel.compiled_step() is not None else "NumPy"
     lines.append(
-        f"- Speed: a tracker step is {ratio:.1f}x faster than FilterPy's UKF on the same model "
+        f"- Speed: a tracker step ({kind}) is {ratio:.1f}x faster than FilterPy's UKF on the same "
+        "model "
         + ("(target 10x: met)" if ratio >= 10 else "(target 10x: **not met**)") + soup + "."
     )
     if "detect_ms" in f:
