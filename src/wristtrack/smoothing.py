@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +81,14 @@ def smooth_run(
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(header)
         writer.writerows(out_rows)
-    os.replace(poses_path, out / FILTERED_POSES)
+    # keep the filtered rows under their new name first (a second link to the same file), then
+    # swap the smoothed ones in: at no moment is there no poses.csv
+    filtered = out / FILTERED_POSES
+    filtered.unlink(missing_ok=True)
+    try:
+        os.link(poses_path, filtered)
+    except OSError:  # a file system without hard links
+        shutil.copyfile(poses_path, filtered)
     os.replace(tmp, poses_path)
     states_path.unlink()
     return summary_results
