@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg.blas import dtrsm
 from scipy.linalg.lapack import dpotrf
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 CLUTTER = -1
 METHODS = ("gnn", "jpda", "paper")
@@ -44,7 +44,7 @@ class AssociationParams:
 
 @lru_cache(maxsize=8)
 def _gate_limit(prob: float, dof: int) -> float:
-    return float(chi2.ppf(prob, dof))
+    return float(chdtri(dof, 1.0 - prob))  # the chi2 quantile; scipy.stats costs ~1 s to import
 
 
 def log_likelihood_ratios(

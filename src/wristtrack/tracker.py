@@ -2,12 +2,15 @@
 
 A small state machine: ``initialising`` until the least-squares initialisation succeeds, then
 ``tracking`` (``coasting`` for a frame where no marker could be associated), ``lost`` after too
-many frames with too few markers, from where it re-initialises by itself by fitting the layout.
+many frames with too few markers or too many updates in a row whose normalised innovation
+squared is beyond its chi-square bound, from where it re-initialises by itself by fitting the
+layout.
 The fixed frame W0 is the hand frame of the first initialisation and never moves afterwards.
 
 A tracking frame of the default configuration takes a fast path (_FastStep) that computes the
-same filter in far fewer NumPy calls; every other configuration and every unusual frame takes
-the generic path (Tracker._generic_frame), which is the reference.
+same filter in far fewer NumPy calls, or in one compiled call where numba is installed; every
+other configuration and every unusual frame takes the generic path (Tracker._generic_frame),
+which is the reference.
 """
 
 from __future__ import annotations
@@ -15,11 +18,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from functools import lru_cache
 
 import numpy as np
+from scipy.special import chdtri
 
 from wristtrack import associate as assoc
-from wristtrack import ukf
+from wristtrack import fast_kernel, ukf
 from wristtrack.camera import Camera
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.geometry import so3_log
@@ -43,7 +48,7 @@ class Status(StrEnum):
     INITIALISING = "initialising"  # no estimate yet: waiting for all six markers
     TRACKING = "tracking"  # estimate updated with this frame's markers
     COASTING = "coasting"  # estimate predicted only: no marker associated in this frame
-    LOST = "lost"  # too long without enough markers: no estimate, re-initialising
+    LOST = "lost"  # too long without enough markers, or innovations inconsistent: no estimate
 
 
 @dataclass(frozen=True)
@@ -59,6 +64,11 @@ class TrackerConfig:
     lost_after: int = 15  # consecutive such frames before declaring the track lost
     max_gap: float = 0.5  # s; a longer gap between frames loses the track
     facing_cos: float = 0.05  # a marker whose palm faces away more than this is not expected
+    # Innovation consistency: an update whose NIS exceeds this chi-square quantile is
+    # inconsistent; this many in a row lose the track (0 = never). A consistent filter sees
+    # such a run with probability (1 - quantile)^n, ~1e-15 here.
+    nis_quantile: float = 0.999
+    nis_lost_after: int = 5
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -71,7 +81,11 @@ class TrackerConfig:
 
     @classmethod
     def paper(cls, **kw) -> TrackerConfig:
-        """The paper's method: Euler-angle state, per-blob association, depth only to initialise."""
+        """The paper's method: Euler-angle state, per-blob association, depth only to initialise.
+
+        No innovation-consistency loss: the paper has none (and its filter is not consistent).
+        """
+        kw.setdefault("nis_lost_after", 0)
         return cls(model="paper", association="paper", use_depth=False, **kw)
 
 
@@ -96,6 +110,9 @@ class FrameResult:
     nis_dof: int = 0
     pos_sigma_mm: float = np.nan  # 1-sigma position uncertainty (root of the variance trace)
     rot_sigma_deg: float = np.nan  # 1-sigma orientation uncertainty
+    x: np.ndarray | None = None  # the filter state (model.initial_state layout); for smoothing
+    track_id: int = -1  # which initialisation this estimate descends from (0 = the first)
+    side: str = "right"  # the hand's side (from its layout): signs of the anatomical angles
 
     @property
     def has_estimate(self) -> bool:
@@ -112,6 +129,7 @@ class _Track:
     P: np.ndarray
     timestamp: float
     weak_frames: int = 0
+    inconsistent_frames: int = 0  # consecutive updates with NIS above its chi-square quantile
     R_prev: np.ndarray | None = None
 
 
@@ -133,7 +151,10 @@ class Tracker:
         self._fast: _FastStep | bool | None = None  # built on first use (W0 must be fixed)
         self._frame = -1
         self._last_timestamp = -np.inf
+        self._initialisations = 0
         self.status = Status.INITIALISING
+        self.last_init_error: str | None = None
+        self.max_blobs_seen = 0  # most blobs in a frame offered for initialisation
 
     # ------------------------------------------------------------------------------- stepping
 
@@ -165,9 +186,11 @@ class Tracker:
         )
 
     def _try_initialise(self, det: Detections, labels: np.ndarray | None) -> FrameResult:
+        self.max_blobs_seen = max(self.max_blobs_seen, det.count)
         try:
             init = initialise(det, self.camera, self.layout, labels=labels)
-        except InitialisationError:
+        except InitialisationError as e:
+            self.last_init_error = str(e)  # why the latest attempt failed, for the run's report
             return self._empty(det, self.status)
         if self.R_c0 is None:  # the first initialisation fixes W0 for good
             self.R_c0, self.t_c0 = init.R_ch, init.t_ch
@@ -180,6 +203,7 @@ class Tracker:
         x = self.model.initial_state(R, p)
         P = self.model.initial_covariance(pose_cov)
         self._track = _Track(x, P, det.timestamp, R_prev=R)
+        self._initialisations += 1
         self.status = Status.TRACKING
         n_markers = int(np.sum(init.labels >= 0))
         return self._result(det, Status.TRACKING, init.labels, n_markers, np.nan, 0)
@@ -207,6 +231,12 @@ class Tracker:
         if track.weak_frames > cfg.lost_after:
             self._lose()
             return self._empty(det, Status.LOST)
+        if dof and cfg.nis_lost_after:  # frames without an update neither count nor reset
+            high = nis > _nis_limit(cfg.nis_quantile, dof)
+            track.inconsistent_frames = track.inconsistent_frames + 1 if high else 0
+            if track.inconsistent_frames >= cfg.nis_lost_after:
+                self._lose()  # the estimate no longer explains the markers: start again
+                return self._empty(det, Status.LOST)
         track.x, track.P, track.timestamp = x, P, det.timestamp
         status = Status.TRACKING if n_assoc else Status.COASTING
         self.status = status
@@ -325,11 +355,17 @@ class Tracker:
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum(), 0.0))
         return FrameResult(
             self._frame, det.timestamp, status, R_ch, t_ch, R_rel, p, v.copy(), w, track.P.copy(),
-            labels, n_assoc, n_clutter, nis, dof, pos_sigma, rot_sigma,
+            labels, n_assoc, n_clutter, nis, dof, pos_sigma, rot_sigma, track.x.copy(),
+            self._initialisations - 1, self.layout.side,
         )
 
 
 _ONES = np.ones(256)
+
+
+@lru_cache(maxsize=64)
+def _nis_limit(quantile: float, dof: int) -> float:
+    return float(chdtri(dof, 1.0 - quantile))  # chi2 quantile without importing scipy.stats
 
 
 def _all_finite(a: np.ndarray) -> bool:
@@ -375,7 +411,9 @@ class _FastStep:
     is a quaternion, single poses are Python floats. Used for the constant-rate model with GNN
     association and depth on an undistorted camera, for frames whose blobs all have depth and
     whose markers are all expected in view; anything else goes the generic way (``step``
-    returns None before changing anything).
+    returns None before changing anything). Where numba is installed, ``step`` runs the same
+    computation as one compiled call (fast_kernel) and falls back to ``numpy_step``, the
+    reference, for the frames that call declines.
 
     Rows of the sigma buffer (m = 3 x markers), the model's rows below the measurements:
       [0, m)         measurements, axis-major (u of each marker, then v, then z)
@@ -403,9 +441,35 @@ class _FastStep:
         self._centre_pvw = self._features[1:10, 0]  # the propagated centre's p, v, w
         self._cov = np.empty((m + d, m + d + 1))  # joint covariance, last column free
         self._noise = self._cov.reshape(-1)[: m * (m + d + 2) : m + d + 2]  # measured diagonal
+        # the whole step compiled (fast_kernel) where numba is installed; the NumPy code below
+        # is the reference and takes the frames the compiled step declines
+        self._kernel = fast_kernel.compiled_step()
+        self._kernel_args = self._compiled_constants(model, config) if self._kernel else None
+
+    def _compiled_constants(self, model: ConstantRateModel, config: TrackerConfig) -> tuple:
+        obs, gate, sigma = self.obs, self.gate, self.sigma
+        par = fast_kernel.constants(
+            sigma.scale, obs.camera, obs.noise, model.noise, config.facing_cos,
+            gate.constant, gate.half_gate,
+        )  # fmt: skip
+        layout = np.ascontiguousarray(obs.layout_T.T)
+        R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
+        return layout, R_c0, t_c0, sigma.mean_weights.copy(), sigma.cov_weights.copy(), par
 
     def step(self, det: Detections, x: np.ndarray, P: np.ndarray, dt: float) -> tuple | None:
         """(x, P, labels, markers associated, NIS, its dof) as _generic_frame, or None."""
+        if self._kernel is not None:
+            # contiguous blobs and a float dt: numba compiles once per argument type
+            uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
+            code, x_new, P_new, labels, n_pairs, nis = self._kernel(
+                x, P, float(dt), uv, depth, *self._kernel_args
+            )
+            if code == fast_kernel.OK:
+                return x_new, P_new, labels, n_pairs, nis, 3 * n_pairs
+        return self.numpy_step(det, x, P, dt)
+
+    def numpy_step(self, det: Detections, x: np.ndarray, P: np.ndarray, dt: float) -> tuple | None:
+        """``step`` in NumPy calls only: the reference for the compiled step."""
         m, n, d, C, obs = self.m, self.n_markers, self.dim, self._cov, self.obs
         # predict: sigma points through the motion and the measurement, one set for both
         q_state = quat_of_matrix(x[:9].tolist())
