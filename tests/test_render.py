@@ -151,7 +151,7 @@ def test_back_turned_hand_hides_markers_and_tilted_ones_foreshorten():
     layout = HandLayout.default()
     scenes = {
         "flat": custom_scene("flat", still(1.0), times),
-        "tilted": custom_scene("tilted", still(1.0, (0.0, 0.0, 55.0)), times),
+        "tilted": custom_scene("tilted", still(1.0, (0.0, 0.0, -55.0)), times),  # 55 deg supinated
         "turned": custom_scene("turned", back_turned(), times),
     }
     frames = {k: next(render_frames(s, seed=1)) for k, s in scenes.items()}

@@ -17,7 +17,8 @@ from wristtrack.motion import MODELS
 def _demo(args: argparse.Namespace) -> int:
     from wristtrack.demo import run_demo
 
-    run_demo(args.out, args.scenario, args.seed, _config(args), progress=not args.no_progress)
+    run_demo(args.out, args.scenario, args.seed, _config(args), progress=not args.no_progress,
+             smooth=not args.no_smooth)
     return 0
 
 
@@ -46,10 +47,33 @@ def _track(args: argparse.Namespace) -> int:
     source = f"live:{args.live}" if args.live is not None else args.input
     if source is None:
         raise WristtrackError("give a recording to track, or --live INDEX for a camera")
-    with open_recording(source, camera=camera, hand=hand, **options) as recording:
-        summary = track_recording(
-            recording, args.out, _config(args), progress=not args.no_progress
+    labels = None
+    if args.labels:
+        from wristtrack.label import ManualLabels
+
+        labels = ManualLabels.load(args.labels)
+    if args.resume and args.overlay:
+        raise WristtrackError(
+            "--overlay cannot be combined with --resume (the video cannot be continued); "
+            "resume without --overlay"
         )
+    from wristtrack.checkpoint import RunComplete
+
+    try:
+        with open_recording(source, camera=camera, hand=hand, **options) as recording, \
+                _overlay(args.overlay, recording) as overlay:
+            summary = track_recording(
+                recording, args.out, _config(args), progress=not args.no_progress,
+                smooth=args.smooth, overlay=overlay, resume=args.resume,
+                checkpoint_every=args.checkpoint_every, labels=labels,
+            )
+    except RunComplete as done:
+        print(f"wristtrack track: {done}")
+        return 0
+    except KeyboardInterrupt:
+        print(f"wristtrack track: interrupted; {args.out} keeps every frame done so far; run "
+              "the same command with --resume to continue", file=sys.stderr)
+        return 130
     frames = summary["frames"]
     print(f"tracked {frames['tracked']} of {frames['total']} frames; wrote {args.out}/poses.csv "
           f"and {args.out}/summary.json")
@@ -57,7 +81,95 @@ def _track(args: argparse.Namespace) -> int:
         if rom["range_deg"] is not None:
             print(f"  {axis:<10} {rom['min_deg']:7.1f} .. {rom['max_deg']:6.1f} deg "
                   f"(range {rom['range_deg']:.1f})")
+    if summary.get("kinematics"):
+        from wristtrack.kinematics import format_reaches
+
+        print(format_reaches(summary["kinematics"]))
+    # Exports last: they read the run folder's final poses.csv (smoothed, if asked for).
+    for fmt in dict.fromkeys(args.export or ()):
+        _export_one(args.out, fmt, None, "mm")
+    if args.overlay:
+        print(f"wrote overlay video {args.overlay}")
+    if not args.no_report:
+        from wristtrack.report import write_report
+
+        print(f"wrote {write_report(args.out)} (figures in {args.out}/figures)")
     return 0
+
+
+def _overlay(path: str | None, recording):
+    """The overlay video writer for --overlay, or a no-op context."""
+    import contextlib
+
+    if not path:
+        return contextlib.nullcontext()
+    from wristtrack.overlay import OverlayWriter, nominal_fps
+
+    layout = recording.hand.points if recording.hand is not None else None
+    return OverlayWriter(path, recording.camera, layout, nominal_fps(recording))
+
+
+def _report(args: argparse.Namespace) -> int:
+    from wristtrack.report import write_report
+
+    path = write_report(args.run_dir)
+    print(f"wrote {path} (figures in {path.parent / 'figures'})")
+    return 0
+
+
+def _export_one(run_dir: str, fmt: str, out: str | None, units: str) -> None:
+    from wristtrack.export import export_run, timing_warning
+
+    path, traj = export_run(run_dir, fmt, out, units)
+    warning = timing_warning(traj)
+    if warning:
+        print(warning, file=sys.stderr)
+    print(f"wrote {path} ({len(traj.names)} markers, {int(traj.valid.sum())} of "
+          f"{len(traj.times)} frames with an estimate, {traj.rate:.6g} Hz, {units})")
+
+
+def _export(args: argparse.Namespace) -> int:
+    _export_one(args.run_dir, args.format, args.out, args.units)
+    return 0
+
+
+def _label(args: argparse.Namespace) -> int:
+    from wristtrack.camera import Camera
+    from wristtrack.hand import MARKER_NAMES, HandLayout
+    from wristtrack.io.recording import open_recording
+    from wristtrack.label import check_labels, label_interactively
+
+    camera = Camera.load(args.camera) if args.camera else None
+    hand = HandLayout.load(args.hand) if args.hand else None
+    with open_recording(args.input, camera=camera, hand=hand) as recording:
+        if not args.check:
+            label_interactively(recording, args.labels, args.frame, args.preview)
+            return 0
+        manual, labels, fit = check_labels(recording, args.labels)
+    blobs = {int(k): b for b, k in enumerate(labels) if k >= 0}
+    print(f"{args.labels}: frame {manual.frame}: "
+          + ", ".join(f"{n} = blob {blobs[k]}" for k, n in enumerate(MARKER_NAMES))
+          + f"; initial pose fits with {fit.rms_px:.2f} px RMS")
+    return 0
+
+
+def _batch(args: argparse.Namespace) -> int:
+    from wristtrack.batch import STUDY_CSV, STUDY_HTML, run_batch
+
+    try:
+        rows = run_batch(
+            args.study_dir, args.out, _config(args), workers=args.workers, dask=args.dask,
+            force=args.force, progress=not args.no_progress,
+            checkpoint_every=args.checkpoint_every,
+        )
+    except KeyboardInterrupt:
+        print(f"wristtrack batch: interrupted; {args.out}/{STUDY_CSV} lists what finished; run "
+              "the same command again to continue", file=sys.stderr)
+        return 130
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "skipped", "failed")}
+    print(f"{counts['ok']} tracked, {counts['skipped']} already done, {counts['failed']} "
+          f"failed; wrote {args.out}/{STUDY_CSV} and {args.out}/{STUDY_HTML}")
+    return 1 if counts["failed"] else 0
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -85,6 +197,13 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not a whole number >= 1")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="wristtrack",
@@ -102,6 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--model", choices=sorted(MODELS), default="default")
     demo.add_argument("--association", choices=METHODS, default="gnn")
     demo.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
+    demo.add_argument("--no-smooth", action="store_true", help="report the filtered poses")
     demo.add_argument("--no-progress", action="store_true", help="no progress bar")
     demo.set_defaults(handler=_demo)
 
@@ -114,11 +234,76 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--model", choices=sorted(MODELS), default="default")
     track.add_argument("--association", choices=METHODS, default="gnn")
     track.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
+    track.add_argument(
+        "--smooth", action="store_true",
+        help="offline unscented RTS smoothing of the whole run (filtered poses kept in "
+        "poses_filtered.csv)",
+    )
     track.add_argument("--color-topic", help="ROS bag colour topic (auto-detected otherwise)")
     track.add_argument("--depth-topic", help="ROS bag registered depth topic")
     track.add_argument("--info-topic", help="ROS bag camera_info topic")
     track.add_argument("--no-progress", action="store_true", help="no progress bar")
+    track.add_argument("--resume", action="store_true",
+                       help="continue an interrupted run in --out (same input and options)")
+    track.add_argument("--checkpoint-every", type=_positive_int, default=300, metavar="N",
+                       help="save a checkpoint for --resume every N frames (and every 30 s)")
+    track.add_argument("--no-report", action="store_true",
+                       help="do not write report.html and figures/ at the end")
+    track.add_argument("--overlay", metavar="VIDEO.mp4",
+                       help="also write the frames with blobs, labels and wrist axes drawn")
+    track.add_argument("--labels", metavar="LABELS.json",
+                       help="manual marker labels from 'wristtrack label' (when automatic "
+                       "labelling refuses)")
+    track.add_argument(
+        "--export", action="append", choices=("c3d", "trc"),
+        help="also write the marker trajectories as markers.c3d / markers.trc (repeatable)",
+    )
     track.set_defaults(handler=_track)
+
+    export = sub.add_parser("export", help="write a run's marker trajectories as C3D or TRC")
+    export.add_argument("run_dir", help="output folder of 'wristtrack track'")
+    export.add_argument("--format", required=True, choices=("c3d", "trc"))
+    export.add_argument("--out", help="file to write (default RUN_DIR/markers.c3d or .trc)")
+    export.add_argument("--units", choices=("mm", "m"), default="mm", help="coordinate units")
+    export.set_defaults(handler=_export)
+
+    label = sub.add_parser(
+        "label", help="name the marker blobs of one frame by hand (when automatic labelling "
+        "refuses); writes labels.json for 'track --labels'",
+    )
+    label.add_argument("input", help="recording folder, video file or ROS bag")
+    label.add_argument("--frame", type=int, default=0, help="frame index to label (default 0)")
+    label.add_argument("--labels", default="labels.json",
+                       help="labels file to write, or to validate with --check")
+    label.add_argument("--check", action="store_true",
+                       help="validate LABELS against the recording instead of asking")
+    label.add_argument("--preview", help="numbered-blob PNG (default LABELS_preview.png)")
+    label.add_argument("--camera", help="camera.json (required for a video)")
+    label.add_argument("--hand", help="hand.json (marker layout); else the recording's or depth")
+    label.set_defaults(handler=_label)
+
+    report = sub.add_parser("report", help="(re)write a run's report.html and figures/")
+    report.add_argument("run_dir", help="output folder of 'wristtrack track'")
+    report.set_defaults(handler=_report)
+
+    batch = sub.add_parser(
+        "batch", help="track every recording under a folder, in parallel; study.csv and .html"
+    )
+    batch.add_argument("study_dir", help="folder holding the recordings (searched recursively)")
+    batch.add_argument("--out", required=True, help="output folder: one run folder each")
+    batch.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+                       help="local worker processes (default: one per CPU)")
+    batch.add_argument("--dask", metavar="tcp://HOST:PORT",
+                       help="run on this Dask cluster's workers instead (shared file system)")
+    batch.add_argument("--force", action="store_true",
+                       help="track again the recordings already done")
+    batch.add_argument("--model", choices=sorted(MODELS), default="default")
+    batch.add_argument("--association", choices=METHODS, default="gnn")
+    batch.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
+    batch.add_argument("--checkpoint-every", type=_positive_int, default=300, metavar="N",
+                       help="checkpoint each run every N frames, to resume it if interrupted")
+    batch.add_argument("--no-progress", action="store_true", help="no progress bar")
+    batch.set_defaults(handler=_batch)
 
     evaluate = sub.add_parser("evaluate", help="score a run against a simulated truth.csv")
     evaluate.add_argument("run_dir", help="output folder of 'wristtrack track'")
@@ -145,6 +330,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"wristtrack {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # disk full, permissions: the system's own words, still one line
+        print(f"wristtrack {args.command}: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

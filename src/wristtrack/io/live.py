@@ -61,7 +61,9 @@ class LiveRecording(Recording):
     def __len__(self) -> int:
         raise TypeError(f"{self.source}: a live camera has no length")
 
-    def _frames(self) -> Iterator[Frame]:
+    def _frames(self, start: int = 0) -> Iterator[Frame]:
+        if start:
+            raise InputError(f"camera {self.source}: a live camera cannot start at frame {start}")
         t0 = None
         index = 0
         while self.max_frames is None or index < self.max_frames:
