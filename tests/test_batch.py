@@ -77,7 +77,8 @@ def test_batch_on_a_dask_local_cluster_isolates_the_broken_recordings(study, tmp
     out = tmp_path / "out"
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0") as cluster:
-        rows = run_batch(study, out, dask=cluster.scheduler_address, progress=False, echo=None)
+        rows = run_batch(study, out, dask=cluster.scheduler_address, progress=False, echo=None,
+                         report=False)
     _check_table(study, rows)
     _check_table(study, read_study_csv(out / "study.csv"))  # the same on disk
     page = (out / "study.html").read_text()
@@ -94,6 +95,8 @@ def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, cap
     assert code == 1  # some recordings failed
     assert len(lines) == 9 and "6 tracked, 0 already done, 2 failed" in lines[-1]
     _check_table(study, read_study_csv(out / "study.csv"))
+    for name in GOOD:  # each tracked recording has its own report
+        assert "<img" in (out / name / "report.html").read_text()
 
     # one run interrupted part-way (a real SIGINT at frame 9), one run tracked already
     name = GOOD[0]
@@ -112,7 +115,7 @@ def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, cap
     assert (out / name / CHECKPOINT_FILE).is_file()
     done = {n: (out / n / "summary.json").stat().st_mtime_ns for n in GOOD[1:]}
 
-    rows = run_batch(study, out, workers=2, progress=False, echo=None)
+    rows = run_batch(study, out, workers=2, progress=False, echo=None, report=False)
     by_name = {r["recording"]: r for r in rows}
     assert by_name[name]["status"] == "ok"  # resumed from its checkpoint, now complete
     assert not (out / name / CHECKPOINT_FILE).exists()

@@ -125,10 +125,11 @@ def limit_threads() -> None:
 
 def track_one(
     job: Job, out: str, config: Any = None, force: bool = False,
-    checkpoint_every: int = CHECKPOINT_FRAMES,
+    checkpoint_every: int = CHECKPOINT_FRAMES, smooth: bool = False, report: bool = True,
 ) -> dict[str, Any]:
-    """Track one recording into ``out`` (resuming an interrupted run unless ``force``); its
-    study row. Never raises for a problem with the recording: the row says ``failed``."""
+    """Track one recording into ``out`` (resuming an interrupted run unless ``force``), smoothed
+    if asked, with its report.html unless ``report`` is False; its study row. Never raises for a
+    problem with the recording: the row says ``failed``."""
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
     from wristtrack.io.recording import open_recording
@@ -146,11 +147,15 @@ def track_one(
         hand = HandLayout.load(job.hand) if job.hand else None
         resume = not force and (Path(out) / CHECKPOINT_FILE).is_file()
         with open_recording(job.source, camera=camera, hand=hand) as recording:
-            kw = {"progress": False, "checkpoint_every": checkpoint_every}
+            kw = {"progress": False, "checkpoint_every": checkpoint_every, "smooth": smooth}
             try:
                 summary = track_recording(recording, out, config, resume=resume, **kw)
             except CheckpointMismatch:  # the recording or the settings changed: start over
                 summary = track_recording(recording, out, config, **kw)
+        if report:
+            from wristtrack.report import write_report
+
+            write_report(out)
         return row_from_summary(job.name, "ok", summary)
     except KeyboardInterrupt:
         if _POOL_WORKER:  # the batch stopped us (SIGTERM), the run is checkpointed: take no
@@ -282,6 +287,8 @@ def run_batch(
     progress: bool = True,
     checkpoint_every: int = CHECKPOINT_FRAMES,
     echo: Callable[[str], None] | None = print,
+    smooth: bool = False,
+    report: bool = True,
 ) -> list[dict[str, Any]]:
     """Track every recording under ``study`` into ``out``; the study rows, in name order.
 
@@ -328,7 +335,7 @@ def run_batch(
     bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="recording",
                desc="batch", disable=not progress)
     say = bar.write if progress else echo
-    args = (config, force, checkpoint_every)
+    args = (config, force, checkpoint_every, smooth, report)
     try:
         if todo:
             runner = (_run_dask(todo, out, dask, args) if dask

@@ -160,7 +160,8 @@ def _batch(args: argparse.Namespace) -> int:
         rows = run_batch(
             args.study_dir, args.out, _config(args), workers=args.workers, dask=args.dask,
             force=args.force, progress=not args.no_progress,
-            checkpoint_every=args.checkpoint_every,
+            checkpoint_every=args.checkpoint_every, smooth=args.smooth,
+            report=not args.no_report,
         )
     except KeyboardInterrupt:
         print(f"wristtrack batch: interrupted; {args.out}/{STUDY_CSV} lists what finished; run "
@@ -302,6 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
     batch.add_argument("--checkpoint-every", type=_positive_int, default=300, metavar="N",
                        help="checkpoint each run every N frames, to resume it if interrupted")
+    batch.add_argument("--smooth", action="store_true", help="smooth each run (see track)")
+    batch.add_argument("--no-report", action="store_true",
+                       help="no report.html per recording (study.csv/study.html still written)")
     batch.add_argument("--no-progress", action="store_true", help="no progress bar")
     batch.set_defaults(handler=_batch)
 
