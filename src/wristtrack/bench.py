@@ -259,6 +259,12 @@ def _summary(step: StepTiming, f: dict) -> list[str]:
             + f"); `track` runs at {tp[0]:.0%} of decode-only throughput on PNGs and "
             f"{tp[1]:.0%} on MP4 (target 50%: " + ("met" if met else "**not met**") + ")."
         )
+    if f.get("batch") and 2 in f["batch"]["speedup"]:
+        x = f["batch"]["speedup"][2]
+        lines.append(
+            f"- Batch: 2 workers give {x:.2f}x the throughput of one (target 1.7x: "
+            + ("met" if x >= 1.7 else "**not met**") + ")."
+        )
     if f.get("scaling"):
         rows = f["scaling"]
         ms = [1e3 * s / n for n, s, _ in rows]
@@ -270,6 +276,29 @@ def _summary(step: StepTiming, f: dict) -> list[str]:
                        else "**grows**") + ")."
         )
     return lines
+
+
+def _batch_section(findings: dict, quick: bool) -> list[str]:
+    """`wristtrack batch` on one rendered study with 1 and 2 workers (bench_batch)."""
+    from wristtrack.bench_batch import bench_batch
+
+    result = bench_batch(n_recordings=2 if quick else 6, n_frames=30 if quick else 300)
+    findings["batch"] = result
+    lines = [
+        "## Batch throughput (`wristtrack batch`, process pool)",
+        "",
+        f"{result['recordings']} rendered recordings of {result['frames_each']} frames each, "
+        "tracked and reported by `run_batch` with each worker count (pool start-up included), "
+        f"on {result['cpu_count']} CPUs; load average {result['load_average_before']:.1f} before "
+        f"and {result['load_average_after']:.1f} after. Target: 2 workers >= 1.7x one.",
+        "",
+        "| workers | seconds | recordings/s | throughput vs 1 worker |",
+        "|---|---|---|---|",
+    ]
+    for n, seconds in result["seconds"].items():
+        lines.append(f"| {n} | {seconds:.1f} | {result['recordings_per_s'][n]:.3f} | "
+                     f"{result['speedup'][n]:.2f}x |")
+    return [*lines, ""]
 
 
 def _stonesoup_version() -> str:
@@ -325,6 +354,7 @@ def main(argv: list[str] | None = None) -> int:
     rendered_compare = rendered_sections(
         rendered_recordings(cache, n_frames=render_frames), findings=findings
     )
+    batch = _batch_section(findings, quick)
     ratio = (
         f"{step.filterpy_ms / step.ours_ms:.1f}x faster than FilterPy"
         if step.filterpy_ms
@@ -394,6 +424,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         *pipeline,
         *rendered_compare,
+        *batch,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(text))
