@@ -56,6 +56,8 @@ class ConstantRateModel:
     dim = 12
     rotation = slice(0, 3)  # tangent coordinates of the orientation error (rad)
     position = slice(3, 6)  # and of the position (m)
+    velocity = slice(6, 9)  # m/s
+    angular_velocity = slice(9, 12)  # rad/s
     noise_dim = 6
     name = "default"
 

@@ -69,6 +69,12 @@ class TrackerConfig:
     # such a run with probability (1 - quantile)^n, ~1e-15 here.
     nis_quantile: float = 0.999
     nis_lost_after: int = 5
+    # Manoeuvres: a frame whose association fails (fewer than min_markers markers, or an
+    # update beyond the NIS quantile) although enough blobs are there is associated again with
+    # the prior's velocity variances raised by (a dt)^2, (alpha dt)^2 for each (a m/s^2,
+    # alpha rad/s^2) in turn: an unmodelled acceleration (a fast reach peaks at ~15 m/s^2).
+    # A retry is kept only if its update is consistent. () = off (the paper's method).
+    manoeuvre_accel: tuple[tuple[float, float], ...] = ((15.0, 15.0), (45.0, 45.0))
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -86,6 +92,7 @@ class TrackerConfig:
         No innovation-consistency loss: the paper has none (and its filter is not consistent).
         """
         kw.setdefault("nis_lost_after", 0)
+        kw.setdefault("manoeuvre_accel", ())
         return cls(model="paper", association="paper", use_depth=False, **kw)
 
 
@@ -219,10 +226,9 @@ class Tracker:
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg = self.config
         dt = det.timestamp - track.timestamp
-        fast = self._fast_step(det)
-        out = fast.step(det, track.x, track.P, dt) if fast is not None else None
-        if out is None:
-            out = self._generic_frame(det, track, dt)
+        out = self._filter_frame(det, track, dt)
+        if det.count >= cfg.min_markers and hasattr(self.model, "angular_velocity"):
+            out = self._manoeuvre_retry(det, track, dt, out)
         x, P, labels, n_assoc, nis, dof = out
         if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
             self._lose()
@@ -243,6 +249,29 @@ class Tracker:
         one_to_one = cfg.association == "gnn"  # then the blobs not taken are the clutter
         n_clutter = len(labels) - n_assoc if one_to_one else int(np.sum(labels < 0))
         return self._result(det, status, labels, n_assoc, nis, dof, dt, n_clutter)
+
+    def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
+        """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof)."""
+        fast = self._fast_step(det)
+        out = fast.step(det, track.x, track.P, dt) if fast is not None else None
+        return self._generic_frame(det, track, dt) if out is None else out
+
+    def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
+        """``out``, or a consistent re-association assuming a manoeuvre (see TrackerConfig)."""
+        cfg, model = self.config, self.model
+        n_assoc, nis, dof = out[3], out[4], out[5]
+        if n_assoc >= cfg.min_markers and not (dof and nis > _nis_limit(cfg.nis_quantile, dof)):
+            return out
+        for accel, angular in cfg.manoeuvre_accel:
+            P = track.P.copy()
+            for part, a in ((model.velocity, accel), (model.angular_velocity, angular)):
+                i = np.arange(P.shape[0])[part]
+                P[i, i] += (a * dt) ** 2
+            retry = self._filter_frame(det, replace(track, P=P), dt)
+            n, r_nis, r_dof = retry[3], retry[4], retry[5]
+            if n >= max(cfg.min_markers, n_assoc) and r_nis <= _nis_limit(cfg.nis_quantile, r_dof):
+                return retry
+        return out
 
     def _fast_step(self, det: Detections) -> _FastStep | None:
         """The fast path where this configuration and frame allow it (see _FastStep)."""
