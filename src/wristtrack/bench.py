@@ -259,6 +259,12 @@ def _summary(step: StepTiming, f: dict) -> list[str]:
             + f"); `track` runs at {tp[0]:.0%} of decode-only throughput on PNGs and "
             f"{tp[1]:.0%} on MP4 (target 50%: " + ("met" if met else "**not met**") + ")."
         )
+    if f.get("reach_metrics"):
+        parts = [f"{label}: peak speed {e:+.1f}%, movement time {m:+.1f} frames"
+                 for label, (e, m) in f["reach_metrics"].items()]
+        met = all(abs(e) <= 5 and abs(m) <= 2 for e, m in f["reach_metrics"].values())
+        lines.append("- Reach metrics on the rendered reach against truth (targets 5%, 2 frames: "
+                     + ("met" if met else "**not met**") + "): " + "; ".join(parts) + ".")
     if f.get("batch") and 2 in f["batch"]["speedup"]:
         x = f["batch"]["speedup"][2]
         lines.append(

@@ -79,6 +79,45 @@ def rendered_accuracy_table(
     return lines
 
 
+def reach_metrics_table(recording: Path, work: Path, findings: dict) -> list[str]:
+    """Reach metrics (kinematics.analyse) of the tracked `reach` runs against those of its
+    truth.csv; needs rendered_accuracy_table's runs in ``work``."""
+    from wristtrack.kinematics import analyse_file
+
+    truth = analyse_file(recording / "truth.csv")
+    rate = truth["frame_rate_hz"]
+    lines = [
+        "## Reach metrics on the rendered `reach` recording",
+        "",
+        "`wristtrack.kinematics` on the tracked poses against the same analysis of the "
+        "simulator's truth.csv (one minimum-jerk reach). Targets: peak speed within 5%, movement "
+        "time within 2 frames.",
+        "",
+        "| poses | reaches | peak speed (m/s) | error | movement time (s) | error (frames) | "
+        "time to peak (%) | SPARC | LDJ | movement units |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    runs = {"truth": truth}
+    for label in ("default", "default --smooth"):
+        runs[label] = analyse_file(work / f"reach-{label}" / "poses.csv")
+    t0 = truth["reaches"][0] if truth["reaches"] else None
+    for label, k in runs.items():
+        if not k["reaches"] or t0 is None:
+            lines.append(f"| {label} | {len(k['reaches'])} | n/a | | | | | | | |")
+            continue
+        r = k["reaches"][0]
+        speed_err = 100 * (r["peak_speed_m_s"] / t0["peak_speed_m_s"] - 1)
+        mt_frames = (r["movement_time_s"] - t0["movement_time_s"]) * rate
+        if label != "truth":
+            findings.setdefault("reach_metrics", {})[label] = (speed_err, mt_frames)
+        lines.append(
+            f"| {label} | {len(k['reaches'])} | {r['peak_speed_m_s']:.3f} | {speed_err:+.1f}% | "
+            f"{r['movement_time_s']:.3f} | {mt_frames:+.1f} | {r['time_to_peak_pct']:.0f} | "
+            f"{r['sparc']:.3f} | {r['log_dimensionless_jerk']:.2f} | {r['movement_units']} |"
+        )
+    return [*lines, ""]
+
+
 def _f(x) -> str:
     return "n/a" if x is None or not np.isfinite(x) else f"{x:.2f}"
 
@@ -245,6 +284,7 @@ def pipeline_sections(
         "",
         *rendered_accuracy_table(recordings, work, findings),
         "",
+        *reach_metrics_table(recordings["reach"], work, findings),
     ]
     ms = detection_ms(recordings["hard"])
     decode, track = throughput(recordings["deviation"], work)
