@@ -12,7 +12,6 @@ to warn.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +20,7 @@ import numpy as np
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.hand import MARKER_NAMES, HandLayout
-from wristtrack.io.poses import read_poses
+from wristtrack.io.run import read_run
 
 FORMATS = {"c3d": "markers.c3d", "trc": "markers.trc"}
 UNITS = {"mm": 1000.0, "m": 1.0}
@@ -84,20 +83,9 @@ def frame_rate(times: np.ndarray, where: str = "poses.csv") -> tuple[float, bool
 def load_run(run_dir: str | Path) -> MarkerTrajectories:
     """Marker trajectories of a run folder (poses.csv + summary.json); one-line InputErrors."""
     run = Path(run_dir)
-    if not run.is_dir():
-        raise InputError(f"run folder {run} not found; give the --out folder of 'wristtrack track'")
+    cols, summary = read_run(run)
     poses_path, summary_path = run / "poses.csv", run / "summary.json"
-    for path in (poses_path, summary_path):
-        if not path.is_file():
-            raise InputError(
-                f"{run} has no {path.name}; give the --out folder of a finished "
-                "'wristtrack track' run"
-            )
-    try:
-        summary = json.loads(summary_path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{summary_path} is not valid JSON ({exc}); re-run the tracker") from None
-    hand = summary.get("hand_layout") if isinstance(summary, dict) else None
+    hand = summary.get("hand_layout")
     if hand is None:
         raise InputError(
             f"{summary_path} holds no hand layout (the run never initialised?); nothing to export"
@@ -106,7 +94,6 @@ def load_run(run_dir: str | Path) -> MarkerTrajectories:
         layout = HandLayout.from_dict(hand, source=f"{summary_path} hand_layout")
     except ConfigError as exc:
         raise InputError(str(exc)) from None
-    cols = read_poses(poses_path)
     times = cols["timestamp"]
     rate, irregular = frame_rate(times, str(poses_path))
     q = np.column_stack([cols[c] for c in ("qw", "qx", "qy", "qz")])

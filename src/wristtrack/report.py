@@ -11,7 +11,6 @@ from __future__ import annotations
 import base64
 import datetime as dt
 import html
-import json
 import math
 import os
 from pathlib import Path
@@ -21,9 +20,8 @@ import numpy as np
 
 from wristtrack import __version__
 from wristtrack import report_figures as rf
-from wristtrack.errors import InputError
 from wristtrack.geometry import matrix_from_quat
-from wristtrack.io.poses import read_poses
+from wristtrack.io.run import read_run
 from wristtrack.kinematics import KinematicsSettings, analyse, lowpass, velocity_profile
 
 FIGURES = (
@@ -72,29 +70,6 @@ window.addEventListener("load", function () {
 
 
 # ----------------------------------------------------------------------------- run loading
-
-
-def load_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""
-    run = Path(run_dir)
-    if not run.is_dir():
-        what = "is a file, not a folder" if run.exists() else "not found"
-        raise InputError(f"run folder {run} {what}; give the --out folder of 'wristtrack track'")
-    poses, summary_path = run / "poses.csv", run / "summary.json"
-    for path in (poses, summary_path):
-        if not path.is_file():
-            raise InputError(
-                f"run folder {run} has no {path.name}; run 'wristtrack track ... --out {run}' first"
-            )
-    try:
-        summary = json.loads(summary_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise InputError(f"{summary_path} is not valid JSON ({exc}); re-run the tracking") from None
-    if not isinstance(summary, dict) or not isinstance(summary.get("range_of_motion"), dict):
-        raise InputError(
-            f"{summary_path} is not a wristtrack summary (no range_of_motion); re-run the tracking"
-        )
-    return read_poses(poses), summary
 
 
 def _kinematics(columns: dict[str, np.ndarray], summary: dict[str, Any]) -> dict[str, Any]:
@@ -340,7 +315,7 @@ def write_report(run_dir: str | Path) -> Path:
     """Write ``run_dir``/report.html and ``run_dir``/figures/*.png from the run's poses.csv and
     summary.json; returns the report's path."""
     run = Path(run_dir)
-    columns, summary = load_run(run)
+    columns, summary = read_run(run)
     kin = _kinematics(columns, summary)
     figures = build_figures(columns, kin)
     pngs = {name: rf.figure_png(fig) for name, fig in figures.items()}

@@ -1,0 +1,39 @@
+"""Reading a finished run folder of ``wristtrack track`` back: poses.csv and summary.json.
+
+Shared by everything that works on a run after the fact (report, exports), so a missing or
+damaged run folder gives the same one-line errors everywhere.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wristtrack.errors import InputError
+from wristtrack.io.poses import read_poses
+
+
+def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""
+    run = Path(run_dir)
+    if not run.is_dir():
+        what = "is a file, not a folder" if run.exists() else "not found"
+        raise InputError(f"run folder {run} {what}; give the --out folder of 'wristtrack track'")
+    poses, summary_path = run / "poses.csv", run / "summary.json"
+    for path in (poses, summary_path):
+        if not path.is_file():
+            raise InputError(
+                f"run folder {run} has no {path.name}; run 'wristtrack track ... --out {run}' first"
+            )
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InputError(f"{summary_path} is not valid JSON ({exc}); re-run the tracking") from None
+    if not isinstance(summary, dict) or not isinstance(summary.get("range_of_motion"), dict):
+        raise InputError(
+            f"{summary_path} is not a wristtrack summary (no range_of_motion); re-run the tracking"
+        )
+    return read_poses(poses), summary
