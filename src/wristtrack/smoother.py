@@ -27,7 +27,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from wristtrack.geometry import so3_log
 from wristtrack.tracker import FrameResult
-from wristtrack.ukf import ManifoldModel, UKFParams, sigma_offsets, sigma_weights, symmetrise
+from wristtrack.ukf import ManifoldModel, UKFParams, propagate_sigma_points, symmetrise
 
 _DEFAULT_PARAMS = UKFParams()
 
@@ -47,23 +47,17 @@ def rts_smooth(
     """
     xs = np.asarray(xs, dtype=float)
     Ps = np.asarray(Ps, dtype=float)
-    n, q = model.dim, model.noise_dim
-    weights = sigma_weights(n + q, params.alpha, params.beta, params.kappa)
+    n = model.dim
     xs_s, Ps_s = xs.copy(), Ps.copy()
-    Pa = np.zeros((n + q, n + q))
     for k in range(len(xs) - 2, -1, -1):
         dt = float(times[k + 1] - times[k])
-        Pa[:n, :n] = Ps[k]
-        Pa[n:, n:] = model.process_noise(dt)
-        offsets = sigma_offsets(Pa, weights)
-        X = model.propagate(model.retract(xs[k], offsets[:, :n]), offsets[:, n:], dt)
-        # the same predicted mean and spread as the filter's prediction (ukf.predict)
-        xi = model.lift(X[0], X)
-        mean = weights.mean @ xi
-        x_pred = model.retract(X[0], mean[None])[0]
-        d = (xi - mean) * weights.cov[:, None]
-        P_pred = symmetrise((xi - mean).T @ d)
-        C = offsets[:, :n].T @ d  # offsets at k have zero weighted mean by symmetry
+        # the filter's own prediction (ukf.predict), with the sigma points it started from
+        _, d, x_pred, weights, offsets = propagate_sigma_points(
+            model, xs[k], Ps[k], dt, model.process_noise(dt), params
+        )
+        wd = d * weights.cov[:, None]
+        P_pred = symmetrise(d.T @ wd)
+        C = offsets[:, :n].T @ wd  # offsets at k have zero weighted mean by symmetry
         G = _right_divide(C, P_pred)
         delta = model.lift(x_pred, xs_s[k + 1][None])[0]
         xs_s[k] = model.retract(xs[k], (G @ delta)[None])[0]

@@ -112,9 +112,11 @@ class UKFParams:
     kappa: float = 0.0
 
 
-def _propagate_sigma_points(model, x, P, dt, Q_noise, params):
+def propagate_sigma_points(model, x, P, dt, Q_noise, params):
     """Augmented sigma points of (x, P, Q_noise) pushed through the model: the propagated states
-    X (S, D), their tangent offsets d (S, n) from the predicted mean, the mean and the weights."""
+    X (S, D), their tangent offsets d (S, n) from the predicted mean, the mean, the weights and
+    the sigma points' own offsets (S, n + q) before propagation (for cross-covariances, as the
+    smoother needs)."""
     n, q = model.dim, model.noise_dim
     if q:
         Pa = np.zeros((n + q, n + q))
@@ -130,7 +132,7 @@ def _propagate_sigma_points(model, x, P, dt, Q_noise, params):
     xi = model.lift(centre, X)
     mean = w.mean @ xi
     x_new = model.retract(centre, mean[None])[0]
-    return X, xi - mean, x_new, w
+    return X, xi - mean, x_new, w, offsets
 
 
 def predict(
@@ -148,7 +150,7 @@ def predict(
     ``Q_additive`` (n, n), if given, is added to the predicted tangent covariance (the classic
     additive-noise UKF; FilterPy's form).
     """
-    _, d, x_new, w = _propagate_sigma_points(model, x, P, dt, Q_noise, params)
+    _, d, x_new, w, _ = propagate_sigma_points(model, x, P, dt, Q_noise, params)
     P_new = (d.T * w.cov) @ d
     if Q_additive is not None:
         P_new = P_new + Q_additive
@@ -202,7 +204,7 @@ def predict_with_measurement(
     included), so they are transformed through h directly instead of being drawn again: one
     Cholesky factor and one retraction less per frame. Returns (x, P, prediction).
     """
-    X, d, x_new, w = _propagate_sigma_points(model, x, P, dt, Q_noise, params)
+    X, d, x_new, w, _ = propagate_sigma_points(model, x, P, dt, Q_noise, params)
     wd = d * w.cov[:, None]
     P_new = symmetrise(d.T @ wd)
     Y = h(X)
