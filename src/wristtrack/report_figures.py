@@ -41,6 +41,14 @@ def _new(height_in: float) -> Figure:
     return fig
 
 
+def _plane_axes(ax, title: str, plane: str) -> None:
+    """Title, millimetre labels and grid of one of the PLANES' panels ("XY", "ZX", "ZY")."""
+    ax.set_title(title)
+    ax.set_xlabel(f"{plane[0]} (mm)")
+    ax.set_ylabel(f"{plane[1]} (mm)")
+    ax.grid(True, lw=0.4, alpha=0.5)
+
+
 def _empty_note(ax, text: str = NO_ESTIMATE) -> None:
     ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center",
             fontsize=10, color="#666666", style="italic")
@@ -95,10 +103,7 @@ def trajectory_figure(p_mm: np.ndarray) -> Figure:
     axes = fig.subplots(1, 3)
     idx = plot_indices(finite)
     for ax, (name, i, j) in zip(axes, PLANES, strict=True):
-        ax.set_title(f"{name} plane")
-        ax.set_xlabel(f"{name[0]} (mm)")
-        ax.set_ylabel(f"{name[1]} (mm)")
-        ax.grid(True, lw=0.4, alpha=0.5)
+        _plane_axes(ax, f"{name} plane", name)
         if not finite.any():
             _empty_note(ax)
             continue
@@ -259,10 +264,7 @@ def orientation_figure(p_mm: np.ndarray, R: np.ndarray, count: int = 12) -> Figu
         length = max(0.15 * extent, 15.0)  # mm; a still hand still shows readable axes
     idx = plot_indices(finite)
     for ax, (name, i, j) in zip(axes, PLANES, strict=True):
-        ax.set_title(f"view in the {name} plane")
-        ax.set_xlabel(f"{name[0]} (mm)")
-        ax.set_ylabel(f"{name[1]} (mm)")
-        ax.grid(True, lw=0.4, alpha=0.5)
+        _plane_axes(ax, f"view in the {name} plane", name)
         if not picks.size:
             _empty_note(ax)
             continue
