@@ -19,7 +19,7 @@ test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	$(PY) -m wristtrack.bench --out docs/BENCHMARKS.md
+	$(PY) -m benchmarks.run --out docs/BENCHMARKS.md
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests

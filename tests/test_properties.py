@@ -22,12 +22,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wristtrack.camera import Camera
-from wristtrack.detect import MarkerDetector
+from wristtrack.detect.detections import Detections
+from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InputError
-from wristtrack.measurements import Detections
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import scenario
-from wristtrack.tracker import Status, Tracker, TrackerConfig
+from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
 PROPERTY = settings(
     max_examples=30,

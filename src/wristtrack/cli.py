@@ -9,13 +9,13 @@ import argparse
 import sys
 
 from wristtrack import __version__
-from wristtrack.associate import METHODS
 from wristtrack.errors import WristtrackError
-from wristtrack.motion import MODELS
+from wristtrack.filter.associate import METHODS
+from wristtrack.tracking.models import MODELS
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from wristtrack.demo import run_demo
+    from wristtrack.pipeline.demo import run_demo
 
     run_demo(args.out, args.scenario, args.seed, _config(args), progress=not args.no_progress,
              smooth=not args.no_smooth)
@@ -23,7 +23,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _config(args: argparse.Namespace):
-    from wristtrack.tracker import TrackerConfig
+    from wristtrack.tracking.tracker import TrackerConfig
 
     if args.model == "paper":
         return TrackerConfig.paper()
@@ -34,7 +34,7 @@ def _track(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
     from wristtrack.io.recording import open_recording
-    from wristtrack.pipeline import track_recording
+    from wristtrack.pipeline.track import track_recording
 
     camera = Camera.load(args.camera) if args.camera else None
     hand = HandLayout.load(args.hand) if args.hand else None
@@ -49,7 +49,7 @@ def _track(args: argparse.Namespace) -> int:
         raise WristtrackError("give a recording to track, or --live INDEX for a camera")
     labels = None
     if args.labels:
-        from wristtrack.label import ManualLabels
+        from wristtrack.pipeline.label import ManualLabels
 
         labels = ManualLabels.load(args.labels)
     if args.resume and args.overlay:
@@ -57,7 +57,7 @@ def _track(args: argparse.Namespace) -> int:
             "--overlay cannot be combined with --resume (the video cannot be continued); "
             "resume without --overlay"
         )
-    from wristtrack.checkpoint import RunComplete
+    from wristtrack.pipeline.checkpoint import RunComplete
 
     try:
         with open_recording(source, camera=camera, hand=hand, **options) as recording, \
@@ -82,7 +82,7 @@ def _track(args: argparse.Namespace) -> int:
             print(f"  {axis:<10} {rom['min_deg']:7.1f} .. {rom['max_deg']:6.1f} deg "
                   f"(range {rom['range_deg']:.1f})")
     if summary.get("kinematics"):
-        from wristtrack.kinematics import format_reaches
+        from wristtrack.analysis.kinematics import format_reaches
 
         print(format_reaches(summary["kinematics"]))
     # Exports last: they read the run folder's final poses.csv (smoothed, if asked for).
@@ -91,7 +91,7 @@ def _track(args: argparse.Namespace) -> int:
     if args.overlay:
         print(f"wrote overlay video {args.overlay}")
     if not args.no_report:
-        from wristtrack.report import write_report
+        from wristtrack.report.html import write_report
 
         print(f"wrote {write_report(args.out)} (figures in {args.out}/figures)")
     return 0
@@ -103,14 +103,14 @@ def _overlay(path: str | None, recording):
 
     if not path:
         return contextlib.nullcontext()
-    from wristtrack.overlay import OverlayWriter, nominal_fps
+    from wristtrack.report.overlay import OverlayWriter, nominal_fps
 
     layout = recording.hand.points if recording.hand is not None else None
     return OverlayWriter(path, recording.camera, layout, nominal_fps(recording))
 
 
 def _report(args: argparse.Namespace) -> int:
-    from wristtrack.report import write_report
+    from wristtrack.report.html import write_report
 
     path = write_report(args.run_dir)
     print(f"wrote {path} (figures in {path.parent / 'figures'})")
@@ -118,7 +118,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _export_one(run_dir: str, fmt: str, out: str | None, units: str) -> None:
-    from wristtrack.export import export_run, timing_warning
+    from wristtrack.analysis.export import export_run, timing_warning
 
     path, traj = export_run(run_dir, fmt, out, units)
     warning = timing_warning(traj)
@@ -137,7 +137,7 @@ def _label(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import MARKER_NAMES, HandLayout
     from wristtrack.io.recording import open_recording
-    from wristtrack.label import check_labels, label_interactively
+    from wristtrack.pipeline.label import check_labels, label_interactively
 
     camera = Camera.load(args.camera) if args.camera else None
     hand = HandLayout.load(args.hand) if args.hand else None
@@ -154,7 +154,7 @@ def _label(args: argparse.Namespace) -> int:
 
 
 def _batch(args: argparse.Namespace) -> int:
-    from wristtrack.batch import STUDY_CSV, STUDY_HTML, run_batch
+    from wristtrack.pipeline.batch import STUDY_CSV, STUDY_HTML, run_batch
 
     try:
         rows = run_batch(
@@ -176,8 +176,8 @@ def _batch(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from wristtrack.evaluate import evaluate, format_report
-    from wristtrack.summary import write_json_atomic
+    from wristtrack.analysis.evaluate import evaluate, format_report
+    from wristtrack.analysis.summary import write_json_atomic
 
     run = Path(args.run_dir)
     truth = Path(args.truth) if args.truth else None

@@ -8,8 +8,8 @@ import numpy as np
 
 from wristtrack import geometry
 from wristtrack.camera import Camera
+from wristtrack.detect.detections import Detections
 from wristtrack.hand import MARKER_NAMES, HandLayout
-from wristtrack.measurements import Detections
 from wristtrack.sim.motion import Trajectory
 
 CLUTTER = -1

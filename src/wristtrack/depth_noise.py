@@ -1,0 +1,24 @@
+"""The depth sensor's noise: one function, used by the filter, the initialisation, the simulator
+and the Cramer-Rao bound alike.
+
+Structured-light and time-of-flight RGB-D cameras of the Kinect/Xtion generation measure depth
+with an axial standard deviation that grows with the square of the distance (Khoshelham and
+Elberink 2012, Sensors 12:1437: sigma_z = 1.425e-3 z^2 m for the Kinect v1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+KINECT_DEPTH_COEFF = 1.425e-3  # 1/m: sigma_z = coeff * z^2 (Khoshelham and Elberink 2012)
+
+
+def depth_sigma(
+    z: float | np.ndarray, coeff: float = KINECT_DEPTH_COEFF, floor: float = 0.0
+) -> float | np.ndarray:
+    """Axial depth noise sigma (m) at depth ``z`` (m): max(coeff z^2, floor).
+
+    Plain arithmetic on scalars or arrays, so the compiled tracker step can compile it too.
+    """
+    s = coeff * z * z
+    return np.maximum(s, floor)

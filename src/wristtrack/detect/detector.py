@@ -1,0 +1,506 @@
+"""Blue-marker detector: one colour (+ depth) frame in, unordered sub-pixel blob centres out.
+
+The paper's detection (Cordella et al., section III-A), done as finely as the sensor allows
+(DESIGN.md sections 4-5):
+
+1. Skin region of interest (:mod:`wristtrack.detect.skin`): YCrCb skin classification on a 1/4
+   image, fixed chroma box at first, the subject's own chroma (Mahalanobis) once fitted; the
+   bounding box of the largest skin components plus a margin is searched, and blobs whose
+   centre is off the dilated skin are ignored. No skin: the whole image is searched. To keep
+   the work small, the search first covers only the neighbourhood of the last frame's blobs
+   within that region, and the whole region whenever that finds fewer blobs.
+2. Marker pixels (:mod:`wristtrack.detect.colour`), at half resolution: back-projection of a
+   hue-saturation reference histogram, thresholded; connected components; a component is a
+   marker candidate when the Bhattacharyya coefficient between its own (H, S) histogram and the
+   reference is high enough.
+3. Sub-pixel centres, shape and depth at full resolution (:mod:`wristtrack.detect.blobs`):
+   blueness-weighted centroid, moment ellipse and skewness, trimmed-mean depth; size and shape
+   must fit a 12 mm disc at the blob's depth.
+4. Blobs too long for one marker are split in two where they have a waist (two markers merged
+   by blur or proximity), else flagged; lopsided blobs (a marker clipped by an occluder) and
+   blobs on the image border are flagged ``Blob.suspect``: still reported, for the tracker to
+   down-weight, but not to be taken at face value.
+
+``learn_markers`` refines the reference histogram and the skin model from the labelled
+markers of one frame. Cost: 1.5-2 ms per 640x480 frame on one core of a small shared VM,
+mostly fixed per-call overhead (see :func:`wristtrack.sim.marker_scene.time_detection`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.detect.blobs import (
+    DEPTH_CORE,
+    Shapes,
+    blueness,
+    gather,
+    shapes,
+    split_pair,
+    trimmed_depth,
+    unmix_two_backgrounds_stack,
+    upsample2,
+)
+from wristtrack.detect.colour import (
+    back_project,
+    backprojection_table,
+    blob_similarities,
+    gaussian_reference,
+    hs_histogram,
+    lut_scaled,
+    smooth,
+)
+from wristtrack.detect.detections import Detections
+from wristtrack.detect.skin import SkinModel, SkinRegion
+from wristtrack.errors import ConfigError, InputError
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Thresholds of the marker detector. Colours are OpenCV 8-bit: HSV hue 0..179 (degrees / 2),
+    saturation and value 0..255; YCrCb 0..255 each. Pixel sizes are full resolution."""
+
+    # --- skin region of interest (YCrCb, computed on a 1/skin_downsample image)
+    skin_downsample: int = 4  # even
+    skin_cr: tuple[float, float] = (133.0, 173.0)  # fixed box before adaptation (Chai & Ngan)
+    skin_cb: tuple[float, float] = (77.0, 127.0)
+    skin_y_min: int = 40  # darker pixels are not skin candidates: their chroma is noise
+    skin_mahalanobis: float = 3.5  # adapted model: skin if CrCb Mahalanobis distance <= this
+    skin_min_sigma: float = 2.0  # floor added to the fitted CrCb sigmas (levels)
+    skin_adapt_frames: int = 5  # fit the subject's chroma over the first frames with skin; 0: off
+    skin_min_samples: int = 200  # chroma samples needed for a fit
+    skin_dilate_px: int = 12  # skin mask growth: closes marker holes, reaches edge markers
+    skin_min_fraction: float = 0.004  # smallest skin component used, fraction of the image
+    skin_max_fraction: float = 0.5  # larger "skin" components are background, not a hand
+    skin_component_ratio: float = 0.3  # also keep components at least this x the largest
+    skin_max_components: int = 3
+    roi_margin_px: int = 16  # added around the skin bounding box
+    track_roi: bool = True  # search first near the last frame's blobs, all the skin if short
+    track_margin_px: int = 40  # around the last blobs' box: covers ~1.2 m/s at 0.5 m, 30 fps
+    track_margin_ratio: float = 0.5  # or this fraction of the blobs' spread, if larger
+    require_skin: bool = True  # ignore blobs whose centre is off the dilated skin
+
+    # --- marker colour (HSV); the default reference before learn_markers is a Gaussian
+    marker_hue: float = 110.0  # blue (220 degrees)
+    marker_hue_sigma: float = 8.0
+    marker_sat: float = 200.0
+    marker_sat_sigma: float = 60.0
+    min_saturation: int = 50  # greyer pixels never count as marker: their hue is noise
+    min_value: int = 32  # nor darker ones (value gate in bins of 32)
+    hist_bins: tuple[int, int] = (30, 16)  # (hue, saturation) bins
+    backproject_threshold: float = 0.25  # marker pixel: back-projection >= this x reference peak
+    min_similarity: float = 0.6  # Bhattacharyya coefficient blob histogram vs reference
+
+    # --- size and shape, relative to the expected marker diameter where it is known
+    marker_diameter_m: float = 0.012
+    min_area_px: int = 6
+    max_blob_px: int = 80  # blobs with a longer box side are not markers (a 12 mm disc at 8 cm)
+    min_size_ratio: float = 0.45  # major axis / expected diameter below: not a whole marker
+    merge_ratio: float = 1.2  # above: too long for one marker (merged pair, motion blur)
+    psf_sigma_px: float = 0.7  # optical blur: a disc of diameter D measures sqrt(D^2 + 16 s^2)
+    max_size_ratio: float = 3.2  # above: not marker(s)
+    min_axis_ratio: float = 0.2  # minor / major below: a line, not a disc (~78 deg tilt)
+    min_fill: float = 0.55  # weighted area / moment-ellipse area below: irregular shape (blur
+    # and noise bring small discs down to ~0.7)
+    max_skew: float = 0.18  # skewness above: clipped (lopsided) blob; ~8 % of a disc hidden
+    waist_ratio: float = 0.85  # split a long blob where its profile dips to this fraction
+    split_min_mass_ratio: float = 0.35
+    blur_margin: int = 1  # half-res pixels beyond a blob's box that may still carry its colour
+    mixed_background: float = 0.15  # background colour spread / marker contrast above which
+    # the background is unmixed as two surfaces (blob on the hand's edge, at an occluder)
+    min_contrast: float = 10.0  # marker vs background colour distance (levels) below: no blob
+    max_candidates: int = 24  # per frame, largest first: bounds the per-blob work
+    depth_size_tolerance: float = 0.2  # blob's own depth used for its expected size if within
+    # this (relative) of the frame's median, else the median (an edge blob may see the table)
+
+    # --- depth
+    depth_trim: tuple[float, float] = (0.2, 0.8)  # quantiles kept for the trimmed mean
+
+    # --- learn_markers
+    learn_radius_px: int = 18  # half-size of the patch examined around each labelled marker
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One detected blob (full details; ``Detections`` carries only uv and depth).
+
+    ``suspect`` marks a measurement not to take at face value; ``reason`` says why: "split"
+    (one of two markers cut from a merged blob), "elongated" (too long for one marker, no waist
+    to cut: blur or a merged pair), "clipped" (lopsided: partly hidden), "border" (touches the
+    image border). ``expected_diameter`` is the unforeshortened marker diameter at the blob's
+    depth (px), NaN when unknown.
+    """
+
+    uv: tuple[float, float]
+    area: float  # px, coverage-weighted
+    depth: float  # metres, NaN if no valid depth or no depth image
+    similarity: float  # Bhattacharyya coefficient with the reference histogram, 0..1
+    major: float  # px, full axes of the moment-equivalent ellipse
+    minor: float
+    angle: float  # rad, major-axis direction
+    skew: float
+    expected_diameter: float
+    suspect: bool = False
+    reason: str = ""
+
+
+@dataclass
+class _Stack:
+    """The candidate blobs of one frame, measured together in equal-size windows."""
+
+    origin: np.ndarray  # (n, 2) full-res (x, y) of each window's top-left pixel
+    w: np.ndarray  # (n, sy, sx) blueness weights
+    depth: np.ndarray | None  # (n, sy, sx) raw depth windows
+    similarity: np.ndarray  # (n,)
+    border: np.ndarray  # (n,) bool
+    shape: Shapes | None = None
+    z: np.ndarray | None = None  # (n,) metres
+
+
+class MarkerDetector:
+    """Blue-marker detector for one camera; keeps the adapted colour models between frames."""
+
+    def __init__(self, camera: Camera, config: DetectorConfig | None = None) -> None:
+        self.camera = camera
+        self.config = config = config or DetectorConfig()
+        if config.skin_downsample % 2 or config.skin_downsample < 2:
+            raise ConfigError(
+                f"detector skin_downsample={config.skin_downsample}: must be an even number >= 2"
+            )
+        self.set_reference(gaussian_reference(
+            config.hist_bins,
+            config.marker_hue,
+            config.marker_hue_sigma,
+            config.marker_sat,
+            config.marker_sat_sigma,
+            config.min_saturation,
+        ))
+        self.reference_learned = False
+        self.learned_count = 0  # markers the last learn_markers call could use
+        self.skin = SkinModel(config)
+        self.last_blobs: list[Blob] = []
+        self.last_region: SkinRegion | None = None
+        self._focal = math.sqrt(camera.fx * camera.fy)
+        self._last_diameter = math.nan
+
+    def set_reference(self, reference: np.ndarray) -> None:
+        """Use ``reference`` (H x S histogram, any scale) as the marker colour."""
+        self.reference = lut_scaled(reference)
+        self._table = backprojection_table(self.reference, self.config.min_value)
+
+    # ------------------------------------------------------------------------------- frames
+
+    def _check(self, bgr: np.ndarray, depth: np.ndarray | None) -> None:
+        if not (isinstance(bgr, np.ndarray) and bgr.ndim == 3 and bgr.shape[2] == 3
+                and bgr.dtype == np.uint8 and min(bgr.shape[:2]) >= 16):
+            got = getattr(bgr, "shape", type(bgr).__name__), getattr(bgr, "dtype", "")
+            raise InputError(f"colour frame must be a BGR uint8 (H, W, 3) array, got {got}")
+        if depth is not None and (not isinstance(depth, np.ndarray)
+                                  or depth.shape != bgr.shape[:2]):
+            raise InputError(
+                f"depth frame shape {getattr(depth, 'shape', None)} does not match the colour "
+                f"frame {bgr.shape[:2]}; depth must be registered to colour, (H, W) uint16"
+            )
+
+    def detect(self, bgr: np.ndarray, depth: np.ndarray | None, timestamp: float) -> Detections:
+        """Blob centres (sub-pixel) and depths (metres, trimmed mean; NaN where no valid pixel;
+        None without a depth frame) of one frame; details in :attr:`last_blobs`."""
+        self._check(bgr, depth)
+        h, w = bgr.shape[:2]
+        half = cv2.resize(bgr, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+        region = self.skin.region(half, (h, w))
+        self.last_region = region
+        blobs = None
+        near = self._near_last_blobs(region)
+        if near is not None:
+            stack = self._candidates(bgr, half, depth, near)
+            blobs = [] if stack is None else self._classify(stack)
+            if len(blobs) < len(self.last_blobs):  # something may lie outside: search it all
+                blobs = None
+        if blobs is None:
+            stack = self._candidates(bgr, half, depth, region)
+            blobs = [] if stack is None else self._classify(stack)
+        self.last_blobs = blobs
+        uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
+        d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
+        return Detections(timestamp, uv, d)
+
+    def _near_last_blobs(self, region: SkinRegion) -> SkinRegion | None:
+        """The skin region cut down to the neighbourhood of the last frame's blobs (the hand
+        moves little between frames), or None to search the whole skin region: with fewer than
+        3 blobs last frame, or when tracking is off. The caller searches the whole region again
+        whenever this finds fewer blobs than the last frame had."""
+        cfg = self.config
+        if not cfg.track_roi or len(self.last_blobs) < 3:
+            return None
+        uv = np.array([b.uv for b in self.last_blobs])
+        lo, hi = uv.min(0), uv.max(0)
+        m = max(cfg.track_margin_px, cfg.track_margin_ratio * float((hi - lo).max()))
+        X0, Y0, X1, Y1 = region.box
+        x0, y0 = max(int(lo[0] - m) // 2 * 2, X0), max(int(lo[1] - m) // 2 * 2, Y0)
+        x1, y1 = min(int(hi[0] + m + 2) // 2 * 2, X1), min(int(hi[1] + m + 2) // 2 * 2, Y1)
+        if x1 - x0 < 16 or y1 - y0 < 16:
+            return None
+        return replace(region, box=(x0, y0, x1, y1))
+
+    def marker_mask(self, hsv: np.ndarray) -> np.ndarray:
+        """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference."""
+        bp = back_project(hsv, self._table)
+        return cv2.threshold(bp, self.config.backproject_threshold * 255, 255,
+                             cv2.THRESH_BINARY)[1]
+
+    def _candidates(self, bgr, half, depth, region: SkinRegion) -> _Stack | None:
+        """Marker candidates, found at half resolution (cheap), weighted at full resolution."""
+        cfg = self.config
+        X0, Y0, X1, Y1 = region.box
+        hx0, hy0 = X0 // 2, Y0 // 2
+        half_roi = half[hy0 : Y1 // 2, hx0 : X1 // 2]
+        hsv = cv2.cvtColor(half_roi, cv2.COLOR_BGR2HSV)
+        n, labels, stats, cents = cv2.connectedComponentsWithStats(
+            self.marker_mask(hsv), connectivity=8, ltype=cv2.CV_16U
+        )
+        if n <= 1:
+            return None
+        stats, cents = stats[1:], cents[1:]
+        x, y, bw, bh, area = stats.T
+        ok = (area * 4 >= cfg.min_area_px) & (np.maximum(bw, bh) * 2 <= cfg.max_blob_px)
+        if cfg.require_skin and region.found:
+            # half-res pixel x covers full-res 2x, 2x+1: centre 2x + 0.5
+            ok &= region.on_skin((cents + (hx0, hy0)) * 2 + 0.5)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            return None
+        idx = idx[np.argsort(-area[idx], kind="stable")[: cfg.max_candidates]]
+        x, y, bw, bh = x[idx], y[idx], bw[idx], bh[idx]
+
+        # One window size for all (half-res): the largest box plus the blur margin and a
+        # 2-pixel background ring on each side, shifted to lie inside the search region.
+        hh, hw = labels.shape
+        mg = cfg.blur_margin
+        pad = mg + 2
+        sy = min(int(bh.max()) + 2 * pad, hh)
+        sx = min(int(bw.max()) + 2 * pad, hw)
+        wy0 = np.minimum(np.maximum(y + bh // 2 - sy // 2, 0), hh - sy)
+        wx0 = np.minimum(np.maximum(x + bw // 2 - sx // 2, 0), hw - sx)
+        lab = gather(labels, wy0, wx0, (sy, sx))
+        core = lab == (idx + 1).astype(labels.dtype)[:, None, None]
+        # the paper's test: each blob's colour histogram against the reference
+        sims = blob_similarities(gather(hsv, wy0, wx0, (sy, sx)), core, self.reference)
+        good = sims >= cfg.min_similarity
+        if not good.any():
+            return None
+        if not good.all():
+            x, y, bw, bh, wy0, wx0, lab, core, sims = (
+                v[good] for v in (x, y, bw, bh, wy0, wx0, lab, core, sims))
+        # support: the blob's box grown by the blur margin; the background ring is the rest
+        iy, ix = np.arange(sy), np.arange(sx)
+        in_y = (iy >= (y - mg - wy0)[:, None]) & (iy < (y + bh + mg - wy0)[:, None])
+        in_x = (ix >= (x - mg - wx0)[:, None]) & (ix < (x + bw + mg - wx0)[:, None])
+        box = in_y[:, :, None] & in_x[:, None, :]
+        free = lab == 0
+        ring = free & ~box
+        # colour sums over the blob and over the ring as one batched matrix product
+        nb = len(x)
+        hp = gather(half_roi, wy0, wx0, (sy, sx)).reshape(nb, sy * sx, 3).astype(np.float64)
+        sel = np.stack([core, ring], 1).reshape(nb, 2, sy * sx).astype(np.float64)
+        sums = sel @ hp
+        sq = sel[:, 1:] @ (hp * hp)
+        n_core, n_ring = sel.sum(2).T
+        m = sums[:, 0] / n_core[:, None]
+        b = sums[:, 1] / np.maximum(n_ring, 1)[:, None]
+        spread = np.sqrt(np.maximum(sq[:, 0] / np.maximum(n_ring, 1)[:, None] - b * b, 0).sum(1))
+        contrast = np.sqrt(((m - b) ** 2).sum(1))
+        keep = (n_ring >= 4) & (contrast >= cfg.min_contrast)
+        if not keep.any():
+            return None
+
+        # full resolution
+        gy, gx = 2 * (hy0 + wy0), 2 * (hx0 + wx0)
+        patch = gather(bgr, gy, gx, (2 * sy, 2 * sx))
+        t = blueness(patch, m, b)
+        mixed = np.flatnonzero(keep & (spread > cfg.mixed_background * contrast))
+        if mixed.size:
+            # each mixed blob's support (its box) unmixed against two background colours
+            u, ok = unmix_two_backgrounds_stack(patch[mixed], hp[mixed],
+                                                ring[mixed].reshape(len(mixed), -1),
+                                                m[mixed], b[mixed])
+            # (only the support is used below: the rest of each window is zeroed)
+            t[mixed[ok]] = u[ok]
+        # weights only inside the support, off other blobs; scaled so the bluest pixel is 1
+        t *= upsample2(box & (free | core))
+        peak = t.reshape(len(t), -1).max(1)
+        keep &= peak > 0.5
+        t /= np.where(keep, peak, 1.0).astype(np.float32)[:, None, None]
+        dwin = None if depth is None else gather(depth, gy, gx, (2 * sy, 2 * sx))
+        H, W = bgr.shape[:2]
+        border = ((X0 + 2 * x <= 0) | (Y0 + 2 * y <= 0)
+                  | (X0 + 2 * (x + bw) >= W - 1) | (Y0 + 2 * (y + bh) >= H - 1))
+        st = _Stack(np.stack([gx, gy], 1)[keep], t[keep],
+                    None if dwin is None else dwin[keep], sims[keep], border[keep])
+        self._measure(st)
+        return st
+
+    def _measure(self, st: _Stack) -> None:
+        """Shapes and depths (metres) of a stack, in place."""
+        st.shape = shapes(st.w)
+        if st.depth is None:
+            st.z = np.full(len(st.w), np.nan)
+        else:
+            st.z = trimmed_depth(st.depth, st.w > DEPTH_CORE, self.config.depth_trim)
+            st.z *= self.camera.depth_scale
+
+    def _classify(self, st: _Stack) -> list[Blob]:
+        cfg = self.config
+        sh = st.shape
+        with np.errstate(divide="ignore", invalid="ignore"):
+            own_d = self._focal * cfg.marker_diameter_m / st.z
+        # Expected marker diameter: from the blob's own depth where that agrees with the frame's
+        # median (all markers are on one hand; a blob on the hand's edge may average in the
+        # table behind), else the frame's median from depth, else the median blob length (most
+        # blobs are single markers), else the previous frame's.
+        finite = np.sort(own_d[np.isfinite(own_d)])
+        if finite.size:
+            frame_d = float(finite[finite.size // 2])
+        elif len(sh.major) >= 3:
+            frame_d = float(np.sort(sh.major)[len(sh.major) // 2])
+        else:
+            frame_d = self._last_diameter
+        if frame_d > 0:
+            self._last_diameter = frame_d
+        with np.errstate(invalid="ignore"):
+            agree = np.abs(own_d - frame_d) <= cfg.depth_size_tolerance * frame_d
+        exp_d = np.where(agree, own_d, frame_d)
+        ratio = sh.major / np.sqrt(exp_d * exp_d + 16 * cfg.psf_sigma_px**2)
+        ok = ((sh.mass >= cfg.min_area_px) & (sh.minor >= cfg.min_axis_ratio * sh.major)
+              & (sh.mass >= cfg.min_fill * np.pi / 4 * sh.major * sh.minor))
+        with np.errstate(invalid="ignore"):
+            ok &= ~((ratio < cfg.min_size_ratio) | (ratio > cfg.max_size_ratio))
+            long = ok & (ratio > cfg.merge_ratio)
+        blobs = []
+        for k in np.flatnonzero(ok).tolist():
+            reason = "border" if st.border[k] else ""
+            if long[k]:
+                parts = self._split(st, k, float(exp_d[k]))
+                if parts:
+                    blobs.extend(parts)
+                    continue
+                reason = reason or "elongated"
+            if not reason and sh.skew[k] > cfg.max_skew:
+                reason = "clipped"
+            blobs.append(self._blob(st, k, float(exp_d[k]), reason))
+        return blobs
+
+    @staticmethod
+    def _blob(st: _Stack, k: int, expected: float, reason: str) -> Blob:
+        sh = st.shape
+        return Blob(
+            uv=(float(st.origin[k, 0] + sh.cx[k]), float(st.origin[k, 1] + sh.cy[k])),
+            area=float(sh.mass[k]),
+            depth=float(st.z[k]),
+            similarity=float(st.similarity[k]),
+            major=float(sh.major[k]),
+            minor=float(sh.minor[k]),
+            angle=float(sh.angle[k]),
+            skew=float(sh.skew[k]),
+            expected_diameter=expected,
+            suspect=bool(reason),
+            reason=reason,
+        )
+
+    def _split(self, st: _Stack, k: int, expected: float) -> list[Blob]:
+        """The two markers of an elongated blob, or [] if it has no waist to cut at."""
+        cfg = self.config
+        sh = st.shape
+        halves = split_pair(st.w[k], sh.cx[k], sh.cy[k], sh.angle[k], cfg.waist_ratio,
+                            cfg.split_min_mass_ratio)
+        if halves is None:
+            return []
+        two = _Stack(st.origin[[k, k]], st.w[k] * np.stack(halves),
+                     None if st.depth is None else st.depth[[k, k]],
+                     st.similarity[[k, k]], st.border[[k, k]])
+        self._measure(two)
+        return [self._blob(two, j, expected, "split") for j in range(2)]
+
+    # ---------------------------------------------------------------------------- learning
+
+    def learn_markers(self, bgr: np.ndarray, uv: np.ndarray) -> None:
+        """Refine the marker reference histogram and the skin model from labelled markers.
+
+        ``uv`` (N,2): the centres of known markers in ``bgr`` (the tracker passes the six it
+        initialised on). Around each, the marker is segmented by colour alone (pixels closer to
+        the colour at its centre than to the surrounding skin, connected to the centre), so this
+        works even when the current reference no longer matches (a white-balance change); the
+        markers' pixels give the new reference, the hand between and around them (markers
+        excluded) gives the subject's skin chroma. Markers that do not stand out are skipped;
+        if none does, the models stay as they were (:attr:`learned_count` says how many were
+        used): a refinement that cannot be made must not stop a recording.
+        """
+        self._check(bgr, None)
+        try:
+            uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"learn_markers: marker positions must be an (N, 2) array of pixels, got {uv!r}"
+            ) from None
+        h, w = bgr.shape[:2]
+        r = self.config.learn_radius_px
+        marker = np.zeros((h, w), np.uint8)
+        radii, used = [], []
+        for u, v in uv:
+            if not (np.isfinite(u) and np.isfinite(v)):
+                continue
+            cu, cv_ = int(round(u)), int(round(v))
+            x0, y0 = max(cu - r, 0), max(cv_ - r, 0)
+            x1, y1 = min(cu + r + 1, w), min(cv_ + r + 1, h)
+            if not (x0 <= cu < x1 and y0 <= cv_ < y1):
+                continue
+            seg = _segment_marker(bgr[y0:y1, x0:x1].astype(np.float32), cu - x0, cv_ - y0)
+            if seg is not None:
+                marker[y0:y1, x0:x1] |= seg
+                radii.append(math.sqrt(np.count_nonzero(seg) / math.pi))
+                used.append((cu, cv_))
+        self.learned_count = len(radii)
+        if not radii:
+            return
+        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+        self.set_reference(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
+        self.reference_learned = True
+        # skin: the hand around the markers used, the markers themselves (grown) cut out
+        rad = float(np.median(radii))
+        hull = cv2.convexHull(np.array(used, np.int32))
+        skin = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(skin, hull, 1)
+        skin = cv2.dilate(skin, cv2.getStructuringElement(
+            cv2.MORPH_ELLIPSE, (int(4 * rad) | 1, int(4 * rad) | 1)))
+        grown = cv2.dilate(marker, cv2.getStructuringElement(
+            cv2.MORPH_ELLIPSE, (int(2 * rad) | 1, int(2 * rad) | 1)))
+        skin[grown > 0] = 0
+        self.skin.learn(bgr, skin)
+
+
+def _segment_marker(patch: np.ndarray, cu: int, cv_: int) -> np.ndarray | None:
+    """0/1 mask of the marker at (cu, cv_) in a float BGR patch, or None if it does not stand
+    out: pixels nearer the centre colour than the border colour, connected to the centre."""
+    m = np.median(patch[max(cv_ - 1, 0) : cv_ + 2, max(cu - 1, 0) : cu + 2].reshape(-1, 3), 0)
+    border = np.concatenate((patch[0], patch[-1], patch[:, 0], patch[:, -1]))
+    b = np.median(border, 0)
+    d = m - b
+    dd = float(d @ d)
+    if dd < 30.0**2:  # no colour contrast with the surroundings worth learning from
+        return None
+    t = (patch - b) @ (d / dd)
+    n, labels = cv2.connectedComponents((t > 0.5).view(np.uint8), connectivity=8)
+    lab = labels[cv_, cu]
+    if lab == 0:
+        return None
+    seg = (labels == lab).astype(np.uint8)
+    # touching the patch border: not an isolated marker (a blue sleeve, a wrong label)
+    if seg[0].any() or seg[-1].any() or seg[:, 0].any() or seg[:, -1].any():
+        return None
+    return seg
+

@@ -1,0 +1,126 @@
+"""``track --smooth``: replace a finished run's filtered poses by smoothed ones.
+
+The run streams filtered poses to poses.csv and filter states to filter_states.f64 as it goes
+(so an interrupted run keeps them). Afterwards this module runs the unscented RTS smoother
+(wristtrack.filter.smoother) over every track, keeps the filtered rows as ``poses_filtered.csv`` and
+writes the smoothed rows as ``poses.csv`` (atomically), row for row: frames without an estimate
+keep their row unchanged, and what the filter saw (markers, clutter, NIS) is kept too.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from wristtrack.errors import InputError
+from wristtrack.filter.smoother import smooth_results
+from wristtrack.filter.ukf import UKFParams
+from wristtrack.io.poses import COLUMNS, pose_row
+from wristtrack.io.states import STATES_FILE, read_states
+from wristtrack.tracking.tracker import FrameResult, Status
+
+FILTERED_POSES = "poses_filtered.csv"
+_STATUSES = {s.value: s for s in Status}
+_NAN3 = np.full(3, np.nan)
+_NAN33 = np.full((3, 3), np.nan)
+
+_DEFAULT_PARAMS = UKFParams()
+
+
+def smooth_run(
+    out: str | Path,
+    model,
+    R_c0: np.ndarray,
+    t_c0: np.ndarray,
+    params: UKFParams = _DEFAULT_PARAMS,
+    side: str = "right",
+) -> list[FrameResult]:
+    """Smooth the run in ``out``; returns one FrameResult per tracked frame (smoothed where it
+    has an estimate) for the summary. Removes the state file once poses.csv is rewritten."""
+    out = Path(out)
+    poses_path, states_path = out / "poses.csv", out / STATES_FILE
+    with open(poses_path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    if body and len(body[-1]) != len(header):  # a last line cut short by an interruption
+        body = body[:-1]
+    states = read_states(states_path)
+    if len(states.frame) != len(body):
+        raise InputError(
+            f"{states_path} has {len(states.frame)} frames but poses.csv has {len(body)}; "
+            "track the recording again with --smooth"
+        )
+    col = {name: j for j, name in enumerate(header)}
+    results = [
+        _filtered_result(row, col, states, k, model, R_c0, t_c0, side) for k, row in enumerate(body)
+    ]
+    tracked = [r for r in results if r is not None]
+    smoothed = iter(smooth_results(model, tracked, params))
+    out_rows = []
+    summary_results = []
+    for row, r in zip(body, results, strict=True):
+        if r is None:  # skipped or unreadable frame: its row stays as it was
+            out_rows.append(row)
+            continue
+        s = next(smoothed)
+        summary_results.append(s)
+        if s.has_estimate:
+            row = pose_row(
+                s.frame, s.timestamp, str(s.status), s.R_ch, s.t_ch, s.R, s.p, s.v, s.w,
+                s.n_visible, s.n_clutter, s.pos_sigma_mm, s.rot_sigma_deg, s.nis, s.nis_dof,
+                s.side,
+            ) + row[len(COLUMNS):]
+        out_rows.append(row)
+    tmp = out / "poses.csv.smoothing"
+    with open(tmp, "w", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(header)
+        writer.writerows(out_rows)
+    # keep the filtered rows under their new name first (a second link to the same file), then
+    # swap the smoothed ones in: at no moment is there no poses.csv
+    filtered = out / FILTERED_POSES
+    filtered.unlink(missing_ok=True)
+    try:
+        os.link(poses_path, filtered)
+    except OSError:  # a file system without hard links
+        shutil.copyfile(poses_path, filtered)
+    os.replace(tmp, poses_path)
+    states_path.unlink()
+    return summary_results
+
+
+def _filtered_result(row, col, states, k, model, R_c0, t_c0, side) -> FrameResult | None:
+    """The tracker's result for poses.csv row ``row``, rebuilt from the row and the state log;
+    None for a row the tracker never saw (a skipped frame)."""
+    status = _STATUSES.get(row[col["status"]])
+    if status is None:
+        return None
+
+    def number(name: str) -> float:
+        cell = row[col[name]] if name in col else ""
+        return float(cell) if cell else math.nan
+
+    n_visible, n_clutter = int(number("n_visible")), int(number("n_clutter"))
+    nis, dof = number("nis"), number("nis_dof")
+    timestamp = float(row[col["timestamp"]])
+    if states.track_id[k] < 0:
+        return FrameResult(
+            int(row[col["frame"]]), timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3,
+            _NAN3, None, np.empty(0, int), n_visible, n_clutter, nis,
+            0 if math.isnan(dof) else int(dof), side=side,
+        )
+    x = states.x[k]
+    R_all, p_all = model.pose(x[None])
+    R, p = R_all[0], p_all[0]
+    v, w = model.velocities(x)
+    return FrameResult(
+        int(row[col["frame"]]), timestamp, status, R_c0 @ R, R_c0 @ p + t_c0, R, p,
+        np.asarray(v), np.asarray(w), states.P[k], np.empty(0, int), n_visible, n_clutter, nis,
+        0 if math.isnan(dof) else int(dof), number("pos_sigma_mm"), number("rot_sigma_deg"),
+        x, int(states.track_id[k]), side,
+    )

@@ -1,0 +1,293 @@
+"""``wristtrack track``: a recording in, poses.csv and summary.json out, one frame at a time.
+
+Frames stream from the reader through the detector and the tracker to the writer, so memory
+stays flat however long the recording, and every processed frame is on disk as soon as it is
+done: an interrupted run keeps what it computed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wristtrack.analysis.kinematics import analyse_file
+from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict, write_json_atomic
+from wristtrack.detect.detector import MarkerDetector
+from wristtrack.errors import InitialisationError, InputError
+from wristtrack.io.poses import PosesWriter, pose_row
+from wristtrack.io.recording import Recording
+from wristtrack.io.states import STATES_FILE, StateWriter
+from wristtrack.pipeline import checkpoint as ckpt
+from wristtrack.pipeline.interrupt import DeferredInterrupt
+from wristtrack.pipeline.smoothing import smooth_run
+from wristtrack.tracking.tracker import FrameResult, Status, Tracker, TrackerConfig
+
+if TYPE_CHECKING:
+    from wristtrack.pipeline.label import ManualLabels
+
+_NAN3 = np.full(3, np.nan)
+_NAN33 = np.full((3, 3), np.nan)
+# Test hook only: seconds to sleep per frame, so a test can kill a run part-way on purpose.
+TEST_SLEEP_ENV = "WRISTTRACK_TEST_SLEEP"
+
+
+def track_recording(
+    recording: Recording,
+    out: str | Path,
+    config: TrackerConfig | None = None,
+    labels: np.ndarray | ManualLabels | None = None,
+    progress: bool = True,
+    smooth: bool = False,
+    overlay: Any = None,
+    resume: bool = False,
+    checkpoint_every: int = ckpt.CHECKPOINT_FRAMES,
+) -> dict[str, Any]:
+    """Track every frame of ``recording``; write ``out``/poses.csv and ``out``/summary.json.
+
+    ``labels`` (M,) optionally names the blobs of the first frame (manual labelling) when the
+    automatic labelling cannot; a ``label.ManualLabels`` (labels.json) names those of its own
+    frame, matched by pixel position (until then the automatic labelling may initialise).
+    ``smooth`` replaces the filtered poses by the unscented RTS smoother's once the run is
+    complete (the filtered ones stay in poses_filtered.csv).
+    ``overlay`` (an overlay.OverlayWriter) receives every frame with its detections and
+    estimate. Returns the summary.
+
+    Interrupted runs: Ctrl-C or SIGTERM stops at the end of the frame being processed, saves a
+    checkpoint (see :mod:`wristtrack.pipeline.checkpoint`; also saved every
+    ``checkpoint_every`` frames or 30 s, so a SIGKILL loses little), writes summary.json with
+    ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
+    run in ``out`` from its checkpoint, with the same result as an uninterrupted run.
+    """
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:  # a file of that name, no permission, read-only disk
+        raise InputError(
+            f"cannot create the output folder {out} ({e.strerror}); give --out a folder you can "
+            "write to"
+        ) from None
+    config = config or TrackerConfig()
+    camera = recording.camera
+    settings = {**_settings(config), "smoothed": bool(smooth)}
+    manual_labels = None if labels is None else (
+        labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
+    )
+    fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
+    checkpoints = ckpt.Checkpointer(out, fingerprint, checkpoint_every)
+    start = 0
+    if resume:
+        saved = ckpt.load_checkpoint(out, fingerprint)
+        ckpt.truncate_outputs(out, saved)  # rows written after the checkpoint are redone
+        start = saved.next_index
+        detector, tracker, summary = (saved.state[k] for k in ("detector", "tracker", "summary"))
+        learned, bad_frames = saved.state["learned"], saved.state["bad_frames"]
+    else:
+        ckpt.clear_stale(out)
+        detector = MarkerDetector(camera)
+        tracker = Tracker(camera, recording.hand, config)
+        summary = SummaryAccumulator()
+        learned = False
+        bad_frames: list[dict[str, Any]] = []
+    interrupted = False
+    pause = float(os.environ.get(TEST_SLEEP_ENV) or 0)
+    bar = _progress(recording, progress)
+    bar.update(start)
+    states = _state_writer(out, tracker, resume) if smooth else _NoStates()
+    outputs = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
+    with PosesWriter(out / "poses.csv", append=resume) as writer, states, \
+            DeferredInterrupt() as stop:
+        try:
+            for frame in recording.frames(start):
+                # Between two frames every object is consistent: the moment to checkpoint.
+                if stop.requested or checkpoints.due(frame.index):
+                    states.flush()  # poses.csv is flushed row by row
+                    checkpoints.save(frame.index, outputs, {
+                        "detector": detector, "tracker": tracker, "summary": summary,
+                        "learned": learned, "bad_frames": bad_frames,
+                    })
+                    if stop.requested:
+                        interrupted = True
+                        break
+                if pause:
+                    time.sleep(pause)
+                if frame.error is not None:  # unreadable frame: note it, go on with the next
+                    _note_bad(bar, bad_frames, frame.index, frame.error)
+                    writer.write(_skipped_row(frame.index, frame.timestamp, 0, "bad_frame"))
+                    states.write(frame.index, frame.timestamp, None)
+                    bar.update(1)
+                    continue
+                det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
+                manual = _frame_labels(labels, frame.index, det) if not learned else None
+                try:
+                    result = tracker.step(det, manual)
+                except InputError as exc:  # e.g. a timestamp that goes backwards: skip the frame
+                    _note_bad(bar, bad_frames, frame.index, str(exc))
+                    writer.write(_skipped_row(frame.index, frame.timestamp, det.count))
+                    states.write(frame.index, frame.timestamp, None)
+                    if overlay is not None:
+                        overlay.add(frame.bgr, det, None)
+                    bar.update(1)
+                    continue
+                if manual is not None and result.status != Status.TRACKING:
+                    raise InitialisationError(
+                        f"the manual labels of frame {frame.index} do not initialise the tracker; "
+                        "check them with `wristtrack label INPUT --labels FILE --check`"
+                    )
+                if result.frame != frame.index:  # after skipped frames: the recording's numbers
+                    result = replace(result, frame=frame.index)
+                if not learned and result.status == Status.TRACKING:
+                    _learn(detector, frame.bgr, det, result)
+                    learned = True
+                writer.write_result(result)
+                states.write(frame.index, frame.timestamp, result)
+                if overlay is not None:
+                    overlay.add(frame.bgr, det, result)
+                summary.add(result)
+                bar.update(1)
+        except KeyboardInterrupt:  # a second Ctrl-C: the last periodic checkpoint stands
+            interrupted = True
+        finally:
+            bar.close()
+    if smooth and not interrupted:
+        checkpoints.discard()  # smoothing rewrites poses.csv: the checkpoint's sizes lapse
+    if smooth and not interrupted and tracker.R_c0 is not None:
+        summary = SummaryAccumulator()  # the summary describes the smoothed poses
+        for result in smooth_run(
+            out, tracker.model, tracker.R_c0, tracker.t_c0, config.ukf, tracker.layout.side
+        ):
+            summary.add(result)
+    data = summary.to_dict(
+        hand_layout=tracker.layout.to_dict() if tracker.layout is not None else None,
+        camera_pose_w0=camera_pose_dict(tracker.R_c0, tracker.t_c0),
+        camera=camera.to_dict(),
+        source=str(recording.source),
+        settings=settings,
+        skipped_frames=bad_frames,
+        interrupted=interrupted,
+        # Read back from disk: poses.csv is final here (smoothed, if asked for).
+        kinematics=analyse_file(out / "poses.csv"),
+    )
+    write_json_atomic(out / "summary.json", data)
+    if interrupted:
+        raise KeyboardInterrupt
+    checkpoints.discard()  # complete
+    if tracker.R_c0 is None:  # the outputs say so too, but a run with no pose is a failure
+        raise InitialisationError(_no_initialisation(recording, summary.frames, tracker))
+    return data
+
+
+def _frame_labels(labels: Any, index: int, det) -> np.ndarray | None:
+    """Manual labels for this frame's blobs, or None: the tracker labels them itself."""
+    if labels is not None and hasattr(labels, "for_frame"):  # label.ManualLabels
+        return labels.for_frame(index, det)
+    return labels if index == 0 else None  # an array names the first frame's blobs
+
+
+MAX_BAD_FRAME_LINES = 10  # bad frames reported on stderr; all of them are in summary.json
+
+
+def _note_bad(bar, bad_frames: list[dict[str, Any]], index: int, error: str) -> None:
+    """Record a skipped frame for summary.json and say so on stderr (the first few)."""
+    bad_frames.append({"frame": index, "error": error})
+    if len(bad_frames) <= MAX_BAD_FRAME_LINES:
+        bar.write(f"wristtrack: frame {index} skipped: {error}", file=sys.stderr)
+    if len(bad_frames) == MAX_BAD_FRAME_LINES + 1:
+        bar.write(
+            "wristtrack: more frames skipped; summary.json lists every one (skipped_frames)",
+            file=sys.stderr,
+        )
+
+
+def _no_initialisation(recording: Recording, n_frames: int, tracker: Tracker) -> str:
+    """Why no frame of the run gave a first pose, in one line."""
+    reason = tracker.last_init_error or "no frame could be read"
+    if tracker.max_blobs_seen < 6:
+        reason = (
+            f"no frame showed all six markers (at most {tracker.max_blobs_seen} blobs in one "
+            "frame); start the recording with the back of the hand, all six markers in view, "
+            "check the lighting and the marker colour"
+        )
+    return (
+        f"no frame of {recording.source} could be initialised (none of {n_frames} frames gave "
+        f"a pose): {reason}; poses.csv and summary.json record the frames"
+    )
+
+
+def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult) -> None:
+    """Refine the detector's colour models from the six labelled markers of the first fix."""
+    uv = np.full((6, 2), np.nan)
+    for blob, label in enumerate(result.labels):
+        if label >= 0:
+            uv[label] = det.uv[blob]
+    if np.isfinite(uv).all():
+        detector.learn_markers(bgr, uv)
+
+
+def _skipped_row(index: int, timestamp: float, n_blobs: int, status: str = "skipped") -> list[str]:
+    return pose_row(
+        index, timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3, _NAN3, 0, n_blobs
+    )
+
+
+def _settings(config: TrackerConfig) -> dict[str, Any]:
+    def clean(value):
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, tuple | list):
+            return [clean(v) for v in value]
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        return value
+
+    return clean(asdict(config))
+
+
+def _state_writer(out: Path, tracker: Tracker, append: bool = False) -> StateWriter:
+    """The per-frame filter states the smoother needs, streamed beside poses.csv."""
+    model = tracker.model
+    state_dim = model.initial_state(np.eye(3), np.zeros(3)).size
+    return StateWriter(out / STATES_FILE, state_dim, model.dim, append=append)
+
+
+class _NoStates:
+    def write(self, frame: int, timestamp: float, result) -> None:
+        pass
+
+    def flush(self) -> None:
+        pass
+
+    def __enter__(self) -> _NoStates:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def write(self, line: str, file=None) -> None:
+        print(line, file=file or sys.stderr)
+
+    def close(self) -> None:
+        pass
+
+
+def _progress(recording: Recording, enabled: bool):
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+
+    try:
+        total = len(recording) or None
+    except TypeError:
+        total = None
+    return tqdm(total=total, unit="frame", desc="tracking", leave=False)
