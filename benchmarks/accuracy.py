@@ -356,8 +356,8 @@ def recorded_detections(recording_dir) -> tuple[Camera, HandLayout | None, list,
     (the detector refines its colour models from the default tracker's first fix, so the
     default tracker run on these detections is exactly ``track``), with the truth."""
     from wristtrack.detect.detector import MarkerDetector
+    from wristtrack.io.open import open_recording
     from wristtrack.io.poses import read_poses, rows_to_poses
-    from wristtrack.io.recording import open_recording
     from wristtrack.tracking.tracker import Status
 
     with open_recording(recording_dir) as recording:

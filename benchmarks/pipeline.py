@@ -14,7 +14,8 @@ import numpy as np
 
 from wristtrack.analysis.evaluate import evaluate
 from wristtrack.detect.detector import MarkerDetector
-from wristtrack.io.recording import Frame, Recording, open_recording
+from wristtrack.io.base import Frame, Recording
+from wristtrack.io.open import open_recording
 from wristtrack.pipeline.track import track_recording
 from wristtrack.sim.render import render_recording
 from wristtrack.sim.scenes import RENDER_SCENARIOS

@@ -36,7 +36,7 @@ _API = {
     "TrackerConfig": "wristtrack.tracking.tracker",
     "FrameResult": "wristtrack.tracking.tracker",
     "Status": "wristtrack.tracking.tracker",
-    "open_recording": "wristtrack.io.recording",
+    "open_recording": "wristtrack.io.open",
     "read_poses": "wristtrack.io.poses",
     "track_recording": "wristtrack.pipeline.track",
     "analyse_file": "wristtrack.analysis.kinematics",

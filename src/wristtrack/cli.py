@@ -33,7 +33,7 @@ def _config(args: argparse.Namespace):
 def _track(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
-    from wristtrack.io.recording import open_recording
+    from wristtrack.io.open import open_recording
     from wristtrack.pipeline.track import track_recording
 
     camera = Camera.load(args.camera) if args.camera else None
@@ -136,7 +136,7 @@ def _export(args: argparse.Namespace) -> int:
 def _label(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import MARKER_NAMES, HandLayout
-    from wristtrack.io.recording import open_recording
+    from wristtrack.io.open import open_recording
     from wristtrack.pipeline.label import check_labels, label_interactively
 
     camera = Camera.load(args.camera) if args.camera else None

@@ -375,7 +375,7 @@ def test_detector_against_the_renderer_truth(tmp_path, scenario):
     clutter, an occluder and brightness drift in 'hard') is found within 1 px of its truth."""
     import csv
 
-    from wristtrack.io.recording import open_recording
+    from wristtrack.io.open import open_recording
     from wristtrack.sim.render import render_recording
     from wristtrack.sim.scenes import make_scene
 

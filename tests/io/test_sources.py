@@ -21,9 +21,11 @@ import pytest
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io import Frame, Recording, RecordingWriter, open_recording
 from wristtrack.io import live as live_module
-from wristtrack.io import rosbag as rosbag_module
+from wristtrack.io.base import Frame, Recording
+from wristtrack.io.folder import RecordingWriter
+from wristtrack.io.open import open_recording
+from wristtrack.io.ros_messages import IMAGE, RosMessage, decode_colour, decode_depth
 
 try:  # the test extra installs rosbags; without it only the ROS bag tests are skipped
     from rosbags.rosbag1 import Writer as Writer1
@@ -623,11 +625,11 @@ def test_image_message_decoding():
         h, w = array.shape[:2]
         rows = array.reshape(h, -1).view(np.uint8)
         rows = np.hstack([rows, np.zeros((h, pad), np.uint8)])
-        return rosbag_module._Msg(0, rosbag_module.IMAGE, SimpleNamespace(
+        return RosMessage(0, IMAGE, SimpleNamespace(
             encoding=encoding, height=h, width=w, step=rows.shape[1], is_bigendian=bigendian,
             data=rows.reshape(-1)))
 
-    dc, dd = rosbag_module.decode_colour, rosbag_module.decode_depth
+    dc, dd = decode_colour, decode_depth
     np.testing.assert_array_equal(dc(msg(rgb, "rgb8", pad=3), "t"), colour(3))
     np.testing.assert_array_equal(dc(msg(colour(3), "bgr8"), "t"), colour(3))
     bgra = cv2.cvtColor(colour(3), cv2.COLOR_BGR2BGRA)

@@ -21,9 +21,9 @@ import pytest
 
 from wristtrack.camera import Camera
 from wristtrack.cli import main
-from wristtrack.io import RecordingWriter, open_recording
+from wristtrack.io.folder import PROBE_FRAMES, RecordingWriter
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.io.recording import PROBE_FRAMES
 from wristtrack.sim.render import render_recording
 
 CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"

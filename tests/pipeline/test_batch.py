@@ -13,8 +13,8 @@ import pytest
 from wristtrack.analysis.summary import AXES
 from wristtrack.cli import main
 from wristtrack.errors import ConfigError
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.io.recording import open_recording
 from wristtrack.pipeline.batch import find_recordings, run_batch
 from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
 from wristtrack.pipeline.track import track_recording

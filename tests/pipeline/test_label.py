@@ -57,7 +57,7 @@ def _blobs(capsys_out):
 def _answers_from_truth(rec, frame):
     """The blob numbers a careful user would type: the detector's blob nearest each truth
     marker (the detector is checked against truth_markers.csv to within 1 px elsewhere)."""
-    from wristtrack.io.recording import open_recording
+    from wristtrack.io.open import open_recording
     from wristtrack.pipeline.label import detect_frame
 
     with open_recording(rec) as recording:

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from wristtrack.cli import main
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.io.recording import open_recording
 from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
 from wristtrack.pipeline.track import TEST_SLEEP_ENV, track_recording
 from wristtrack.sim.render import render_recording

@@ -21,8 +21,8 @@ from wristtrack.cli import main
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InputError
 from wristtrack.geometry import matrix_from_quat
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import PosesWriter, read_poses
-from wristtrack.io.recording import open_recording
 from wristtrack.pipeline.track import track_recording
 from wristtrack.report import figures as rf
 from wristtrack.report.html import FIGURES, REACH_COLUMNS, build_figures, write_report

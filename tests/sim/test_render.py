@@ -10,8 +10,8 @@ import pytest
 
 from wristtrack.camera import Camera
 from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses, rows_to_poses
-from wristtrack.io.recording import open_recording
 from wristtrack.sim.motion import still
 from wristtrack.sim.render import MARKER_RADIUS, RENDER_SCENARIOS, render_frames, render_recording
 from wristtrack.sim.scenes import back_turned, custom_scene, make_scene

@@ -11,8 +11,8 @@ import pytest
 
 from wristtrack.analysis.evaluate import evaluate
 from wristtrack.detect.detections import Detections
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.io.recording import open_recording
 from wristtrack.pipeline.track import track_recording
 from wristtrack.sim.detections import acceptance_noise, simulate_detections
 from wristtrack.sim.motion import sample, scenario, scenario_motion, timestamps

@@ -10,7 +10,7 @@ import cv2
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io.recording import Frame, Recording, as_bgr, reject_options
+from wristtrack.io.base import Frame, Recording, as_bgr, reject_options
 
 
 def parse_device(device: int | str) -> int | str:

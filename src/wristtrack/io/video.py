@@ -14,11 +14,14 @@ import cv2
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io.recording import Frame, Recording, as_bgr, reject_options
+from wristtrack.io.base import Frame, Recording, as_bgr, reject_options
 
 # FFmpeg logs every damaged packet to stderr; the reader reports problems as one line itself.
 # (setdefault: a user who sets the variable keeps their choice.)
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+VIDEO_SUFFIXES = frozenset(  # the file names open_recording and batch take for a video
+    ".mp4 .m4v .avi .mov .mkv .webm .mpg .mpeg .wmv .flv .ogv .mjpeg .mjpg .h264 .ts".split()
+)
 # A container whose stated frame count is estimated (from duration x rate) may be off by one.
 COUNT_SLACK = 1
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from wristtrack.errors import ConfigError, InputError, WristtrackError
-from wristtrack.io.recording import VIDEO_SUFFIXES
+from wristtrack.io.video import VIDEO_SUFFIXES
 from wristtrack.pipeline.checkpoint import (
     CHECKPOINT_FILE,
     CHECKPOINT_FRAMES,
@@ -132,7 +132,7 @@ def track_one(
     problem with the recording: the row says ``failed``."""
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
-    from wristtrack.io.recording import open_recording
+    from wristtrack.io.open import open_recording
     from wristtrack.pipeline.track import track_recording
 
     limit_threads()

@@ -32,7 +32,7 @@ from wristtrack.detect.detections import Detections
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import ConfigError, InitialisationError, InputError, WristtrackError
 from wristtrack.hand import MARKER_NAMES, HandLayout
-from wristtrack.io.recording import Frame, Recording
+from wristtrack.io.base import Frame, Recording
 from wristtrack.jsonfile import read_config, write_config
 from wristtrack.tracking.initialise import InitResult, initialise
 

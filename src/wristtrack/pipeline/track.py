@@ -21,8 +21,8 @@ from wristtrack.analysis.kinematics import analyse_file
 from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict, write_json_atomic
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
+from wristtrack.io.base import Recording
 from wristtrack.io.poses import PosesWriter, pose_row
-from wristtrack.io.recording import Recording
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.interrupt import DeferredInterrupt

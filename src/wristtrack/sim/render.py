@@ -31,8 +31,8 @@ import cv2
 import numpy as np
 
 from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.folder import RecordingWriter
 from wristtrack.io.poses import write_truth
-from wristtrack.io.recording import RecordingWriter
 from wristtrack.sim.motion import min_jerk
 from wristtrack.sim.scenes import RENDER_SCENARIOS, Occlusion, Scene, make_scene
 

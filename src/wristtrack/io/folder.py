@@ -1,17 +1,9 @@
-"""Recordings: the Frame/Recording interface, the native folder reader and writer, dispatch.
+"""The native recording folder: its reader (FolderRecording) and its writer (RecordingWriter).
 
 Native recording folder (DESIGN.md section 3, a contract): ``camera.json``; ``frames.csv`` with
 the header ``timestamp,rgb,depth`` (seconds; paths relative to the folder; an empty depth cell
 means no depth for that frame); ``rgb/*.png`` 8-bit colour; ``depth/*.png`` 16-bit raw depth
 registered to the colour image, 0 = no reading; optional ``hand.json``.
-
-Every reader is a generator of :class:`Frame` holding one frame at a time, so memory does not grow
-with the length of the recording. Problems with the input are one-line InputError/ConfigError
-messages naming the file and saying how to fix it. A problem with the recording as a whole
-(missing files, wrong camera.json, a first frame that cannot be used) is raised when it is
-opened; a problem confined to one frame (a corrupt PNG in the middle) is not raised but yielded
-as a bad frame (``Frame.error`` set, no image) so a long run can note it and go on. Timestamps
-are passed through as given: a non-increasing timestamp is the tracker's to report.
 """
 
 from __future__ import annotations
@@ -19,10 +11,9 @@ from __future__ import annotations
 import csv
 import math
 import shutil
-from collections.abc import Generator, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -30,107 +21,13 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
+from wristtrack.io.base import Frame, Recording, as_bgr, check_depth
 
 FRAMES_HEADER = ("timestamp", "rgb", "depth")
-VIDEO_SUFFIXES = frozenset(
-    ".mp4 .m4v .avi .mov .mkv .webm .mpg .mpeg .wmv .flv .ogv .mjpeg .mjpg .h264 .ts".split()
-)
-LIVE_PREFIX = "live:"
 PROBE_FRAMES = 3  # frames read at opening; if none is usable the recording is refused
 
 
-_NO_IMAGE = np.zeros((0, 0, 3), np.uint8)
-_NO_IMAGE.setflags(write=False)
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One frame: colour as OpenCV BGR uint8 (H,W,3); depth raw uint16 (H,W) or None.
-
-    ``timestamp`` is in seconds; metres of depth = raw * camera.depth_scale (0 = no reading).
-    A bad frame (unreadable, wrong size, ...) has ``error`` set to a one-line message and an
-    empty (0,0,3) image: skip it. ``timestamp`` is then the listed one, or NaN if unknown.
-    """
-
-    index: int
-    timestamp: float
-    bgr: np.ndarray
-    depth: np.ndarray | None = None
-    error: str | None = None
-
-    @classmethod
-    def bad(cls, index: int, timestamp: float, error: str) -> Frame:
-        """A frame that could not be read: its place in the recording and why."""
-        return cls(index, timestamp, _NO_IMAGE, None, error)
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-
-class Recording:
-    """A source of frames: iterate it for :class:`Frame` s, one at a time.
-
-    Subclasses implement :meth:`_frames` (a generator) and :meth:`__len__`. Iterating twice reads
-    the recording twice (a live camera simply goes on streaming).
-    """
-
-    kind = "recording"
-    has_depth = False  # whether frames can carry depth (subclasses set it)
-
-    def __init__(self, source: str, camera: Camera, hand: HandLayout | None = None) -> None:
-        self.source = source
-        self.camera = camera
-        self.hand = hand
-        self._active: list[Generator[Frame, None, None]] = []
-
-    def __iter__(self) -> Iterator[Frame]:
-        return self.frames()
-
-    def frames(self, start: int = 0) -> Iterator[Frame]:
-        """Frames from index ``start`` on (``--resume``). Readers skip the frames before it
-        without decoding them where the format allows (a recording folder, a bag); a video
-        decodes its way forward; a live camera cannot start part-way."""
-        frames = self._frames(start) if start else self._frames()
-        # Keep unfinished iterations so close() can release what they hold.
-        self._active = [g for g in self._active if g.gi_frame is not None]
-        self._active.append(frames)
-        return frames
-
-    def _frames(self, start: int = 0) -> Generator[Frame, None, None]:  # pragma: no cover
-        raise NotImplementedError  # abstract
-
-    def __len__(self) -> int:  # pragma: no cover - abstract
-        raise TypeError(f"{type(self).__name__} has no known length")
-
-    def close(self) -> None:
-        """Release files and devices held by iterations still in progress."""
-        for frames in self._active:
-            frames.close()  # runs the generator's finally blocks
-        self._active.clear()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self.source}>"
-
-    # ------------------------------------------------------------------------ shared checks
-
-    def check_size(self, bgr: np.ndarray, where: str) -> None:
-        """InputError if a colour image's size differs from the camera's (wrong camera.json)."""
-        h, w = bgr.shape[:2]
-        if (w, h) != (self.camera.width, self.camera.height):
-            raise InputError(
-                f"{where} is {w}x{h} but the camera is {self.camera.width}x{self.camera.height}; "
-                "give the camera.json calibrated at this resolution"
-            )
-
-
-# ------------------------------------------------------------------------------ image helpers
+# ------------------------------------------------------------------------------ image files
 
 
 def read_png(path: Path, what: str) -> np.ndarray:
@@ -168,42 +65,6 @@ def _quiet_imdecode(data: np.ndarray) -> np.ndarray | None:
         return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     finally:
         logging.setLogLevel(level)
-
-
-def as_bgr(image: np.ndarray, where: str) -> np.ndarray:
-    """8-bit colour as BGR (H,W,3); grayscale and BGRA are converted; anything else InputError."""
-    if image.dtype != np.uint8:
-        bits = image.dtype.itemsize * 8
-        raise InputError(
-            f"{where} is {bits}-bit ({image.dtype}); colour frames must be 8-bit (convert it, "
-            "e.g. to an 8-bit PNG)"
-        )
-    if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
-        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    if image.ndim == 3 and image.shape[2] == 4:
-        return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-    if image.ndim == 3 and image.shape[2] == 3:
-        return image
-    raise InputError(
-        f"{where} has shape {image.shape}; expected 8-bit colour (H, W, 3)"
-    )
-
-
-def check_depth(depth: np.ndarray, bgr: np.ndarray, where: str) -> np.ndarray:
-    """Raw 16-bit depth (H,W) the size of the colour image, else InputError."""
-    if depth.dtype != np.uint16 or depth.ndim != 2:
-        kind = f"{depth.dtype.itemsize * 8}-bit" if depth.dtype != np.uint16 else "16-bit"
-        channels = depth.shape[2] if depth.ndim == 3 else 1
-        raise InputError(
-            f"{where} is {kind} with {channels} channel(s); depth must be 16-bit single-channel "
-            "raw units (0 = no reading), registered to the colour image"
-        )
-    if depth.shape != bgr.shape[:2]:
-        raise InputError(
-            f"{where} is {depth.shape[1]}x{depth.shape[0]} but the colour image is "
-            f"{bgr.shape[1]}x{bgr.shape[0]}; depth must be registered (aligned) to colour"
-        )
-    return depth
 
 
 # --------------------------------------------------------------------------- native folder
@@ -442,76 +303,3 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-# ------------------------------------------------------------------------------- dispatch
-
-
-def reject_options(kind: str, source: Any, options: dict[str, Any]) -> None:
-    """InputError for options the kind of recording does not take (e.g. a topic for a video)."""
-    if options:
-        raise InputError(
-            f"option(s) {', '.join(sorted(options))} do not apply to {kind} {source}; "
-            "remove them"
-        )
-
-
-def open_recording(
-    source: str | Path,
-    camera: Camera | None = None,
-    hand: HandLayout | None = None,
-    **options: Any,
-) -> Recording:
-    """Open a recording of any supported kind; ``camera``/``hand`` override what it contains.
-
-    - a folder with frames.csv (or that frames.csv): native recording folder;
-    - a video file (.mp4 .avi .mov .mkv ...): RGB only, ``camera`` required;
-    - a ROS 1 ``.bag`` file or a ROS 2 bag folder (metadata.yaml): options ``color_topic``,
-      ``depth_topic``, ``info_topic``, ``sync_tolerance`` (seconds);
-    - ``"live:0"`` (or ``live=0``): an OpenCV camera, ``camera`` required; option ``max_frames``.
-    """
-    live = options.pop("live", None)
-    text = str(source) if source is not None else ""
-    if live is None and text.startswith(LIVE_PREFIX):
-        live = text[len(LIVE_PREFIX):]
-    if live is not None:
-        from wristtrack.io.live import LiveRecording
-
-        return LiveRecording(live, camera, hand, **options)
-    path = Path(source)
-    if not path.exists():
-        raise InputError(
-            f"recording {path} not found; give a recording folder (with frames.csv), a video "
-            "file, a ROS .bag file, a ROS 2 bag folder, or live:INDEX for a camera"
-        )
-    if path.is_file() and path.name in ("frames.csv", "metadata.yaml"):
-        path = path.parent
-    if path.is_dir():
-        if (path / "frames.csv").is_file():
-            reject_options("the recording folder", path, options)
-            return FolderRecording(path, camera, hand)
-        if (path / "metadata.yaml").is_file():
-            from wristtrack.io.rosbag import BagRecording
-
-            return BagRecording(path, camera, hand, **options)
-        raise InputError(
-            f"folder {path} has no frames.csv (recording folder) and no metadata.yaml (ROS 2 "
-            "bag); give the folder that contains one of them"
-        )
-    suffix = path.suffix.lower()
-    if suffix == ".bag":
-        from wristtrack.io.rosbag import BagRecording
-
-        return BagRecording(path, camera, hand, **options)
-    if suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
-        from wristtrack.io.rosbag import BagRecording
-
-        return BagRecording(path.parent, camera, hand, **options)
-    if suffix in VIDEO_SUFFIXES:
-        from wristtrack.io.video import VideoRecording
-
-        return VideoRecording(path, camera, hand, **options)
-    raise InputError(
-        f"{path}: unknown kind of recording ({suffix or 'no extension'}); give a recording "
-        f"folder, a video ({', '.join(sorted(VIDEO_SUFFIXES))}), a .bag file or a ROS 2 bag folder"
-    )
