@@ -9,10 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from wristtrack.analysis.export import frame_rate, marker_positions
+from wristtrack.analysis.export import marker_positions
 from wristtrack.cli import main
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.markers.trajectories import frame_rate
 from wristtrack.io.poses import read_poses
 from wristtrack.sim.render import render_recording
 

@@ -12,7 +12,6 @@ to warn.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,37 +19,9 @@ import numpy as np
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.markers.formats import FILE_NAMES, check_format, write_markers
+from wristtrack.io.markers.trajectories import IRREGULAR_FRACTION, MarkerTrajectories, frame_rate
 from wristtrack.io.run_folder import read_run
-
-FORMATS = {"c3d": "markers.c3d", "trc": "markers.trc"}
-UNITS = {"mm": 1000.0, "m": 1.0}
-# Timing counts as irregular when some frame interval differs from the median by more than this
-# fraction of it (dropped frames, jitter of a USB camera, a skipped backwards timestamp).
-IRREGULAR_FRACTION = 0.10
-
-
-@dataclass(frozen=True)
-class MarkerTrajectories:
-    """Marker positions over a run, in W0, metres; NaN rows where there is no estimate."""
-
-    names: tuple[str, ...]
-    frames: np.ndarray  # (N,) frame numbers of poses.csv (0-based)
-    times: np.ndarray  # (N,) s, as recorded
-    xyz: np.ndarray  # (N, K, 3) metres in W0
-    rate: float  # Hz, 1 / median frame interval
-    irregular: bool  # frame intervals spread more than IRREGULAR_FRACTION of the median
-    source: str  # the run folder
-
-    @property
-    def valid(self) -> np.ndarray:
-        """(N,) frames that have an estimate."""
-        return np.isfinite(self.xyz).all(axis=(1, 2))
-
-    def in_units(self, units: str) -> np.ndarray:
-        """(N, K, 3) positions in ``units`` ("mm" or "m")."""
-        if units not in UNITS:
-            raise ConfigError(f"unknown units {units!r}; choose one of {', '.join(UNITS)}")
-        return self.xyz * UNITS[units]
 
 
 def marker_positions(R: np.ndarray, p: np.ndarray, layout_points: np.ndarray) -> np.ndarray:
@@ -61,26 +32,7 @@ def marker_positions(R: np.ndarray, p: np.ndarray, layout_points: np.ndarray) ->
     return np.einsum("nij,kj->nki", R, layout_points) + p[:, None, :]
 
 
-def frame_rate(times: np.ndarray, where: str = "poses.csv") -> tuple[float, bool]:
-    """(rate in Hz = 1 / median interval, whether the timing is irregular) of timestamps (N,)."""
-    times = np.asarray(times, dtype=float)
-    if times.size < 2 or not np.isfinite(times).all():
-        raise InputError(
-            f"{where}: need at least two frames with finite timestamps to know the frame rate, "
-            f"got {times.size}; export a longer run"
-        )
-    dt = np.diff(times)
-    median = float(np.median(dt))
-    if not median > 0:
-        raise InputError(
-            f"{where}: timestamps do not increase (median frame interval {median} s); "
-            "check the recording's timestamps"
-        )
-    irregular = bool(np.max(np.abs(dt - median)) > IRREGULAR_FRACTION * median)
-    return 1.0 / median, irregular
-
-
-def load_run(run_dir: str | Path) -> MarkerTrajectories:
+def markers_from_run(run_dir: str | Path) -> MarkerTrajectories:
     """Marker trajectories of a run folder (poses.csv + summary.json); one-line InputErrors."""
     run = Path(run_dir)
     cols, summary = read_run(run)
@@ -118,34 +70,15 @@ def load_run(run_dir: str | Path) -> MarkerTrajectories:
     )
 
 
-def export_markers(
-    traj: MarkerTrajectories, fmt: str, out: str | Path, units: str = "mm"
-) -> Path:
-    """Write ``traj`` as ``fmt`` ("c3d" or "trc") to the file ``out``; returns its path."""
-    out = Path(out)
-    if fmt == "c3d":
-        from wristtrack.io.markers.c3d import write_c3d
-
-        write_c3d(out, traj, units)
-    elif fmt == "trc":
-        from wristtrack.io.markers.trc import write_trc
-
-        write_trc(out, traj, units)
-    else:
-        raise ConfigError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    return out
-
-
 def export_run(
     run_dir: str | Path, fmt: str, out: str | Path | None = None, units: str = "mm"
 ) -> tuple[Path, MarkerTrajectories]:
     """Export a run folder's markers as ``fmt``; ``out`` defaults to RUN_DIR/markers.<fmt>."""
-    if fmt not in FORMATS:
-        raise ConfigError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    traj = load_run(run_dir)
+    check_format(fmt)
+    traj = markers_from_run(run_dir)
     if out is None:
-        out = Path(run_dir) / FORMATS[fmt]
-    return export_markers(traj, fmt, out, units), traj
+        out = Path(run_dir) / FILE_NAMES[fmt]
+    return write_markers(traj, fmt, out, units), traj
 
 
 def timing_warning(traj: MarkerTrajectories) -> str:

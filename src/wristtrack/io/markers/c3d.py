@@ -1,4 +1,5 @@
-"""C3D marker files through ezc3d (optional dependency: ``pip install 'wristtrack[c3d]'``).
+"""C3D marker files through ezc3d (optional dependency: ``pip install 'wristtrack[c3d]'``):
+:func:`write_c3d` for our exports, :func:`read_c3d` for a reference system's recordings.
 
 - POINT:LABELS are the marker names, POINT:RATE = 1 / median frame interval, POINT:UNITS "mm"
   or "m", coordinates in W0 (the hand frame at initialisation); float storage (SCALE -1).
@@ -12,14 +13,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wristtrack.errors import ConfigError, InputError
-
-if TYPE_CHECKING:
-    from wristtrack.analysis.export import MarkerTrajectories
+from wristtrack.io.markers.data import MarkerData, unit_scale, zeros_as_gaps
+from wristtrack.io.markers.trajectories import MarkerTrajectories
 
 
 def _ezc3d():
@@ -27,7 +26,7 @@ def _ezc3d():
         import ezc3d
     except ImportError:
         raise ConfigError(
-            "C3D export needs the ezc3d package: pip install 'wristtrack[c3d]'"
+            "C3D files need the ezc3d package: pip install 'wristtrack[c3d]'"
         ) from None
     return ezc3d
 
@@ -57,3 +56,53 @@ def write_c3d(path: str | Path, traj: MarkerTrajectories, units: str = "mm") -> 
         os.replace(tmp, path)
     except (OSError, RuntimeError) as exc:
         raise InputError(f"cannot write {path}: {exc}") from None
+
+
+def _labels(point: dict) -> list[str]:
+    """POINT:LABELS, continued in LABELS2, LABELS3, ... (C3D caps one parameter at 255)."""
+    labels = list(point["LABELS"]["value"])
+    k = 2
+    while f"LABELS{k}" in point:
+        labels += list(point[f"LABELS{k}"]["value"])
+        k += 1
+    return [str(label).strip() for label in labels]
+
+
+def read_c3d(path: str | Path) -> MarkerData:
+    """The marker trajectories of a C3D file, in metres (POINT:UNITS says what the file used).
+
+    Gaps: ezc3d gives NaN where a point's residual is negative; points at exactly (0, 0, 0) are
+    gaps too (some writers mark lost markers so). Times run from 0 at the file's first frame.
+    """
+    ezc3d = _ezc3d()
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"reference file {path} not found")
+    try:
+        c3d = ezc3d.c3d(str(path))
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise InputError(f"{path} is not a readable C3D file ({exc})") from None
+    point = c3d["parameters"]["POINT"]
+    rate = float(c3d["header"]["points"]["frame_rate"])
+    if "RATE" in point and len(point["RATE"]["value"]):
+        rate = float(point["RATE"]["value"][0])
+    if not rate > 0:
+        raise InputError(f"{path}: POINT:RATE is {rate}; the file does not say its frame rate")
+    units = str(point["UNITS"]["value"][0]).strip() if "UNITS" in point else "mm"
+    notes = []
+    if not units:
+        units = "mm"  # the C3D default
+        notes.append("POINT:UNITS empty: millimetres assumed (the C3D default)")
+    scale = unit_scale(units, str(path))
+    labels = _labels(point)
+    xyz = np.asarray(c3d["data"]["points"][:3], dtype=float).transpose(2, 1, 0)  # (N, K, 3)
+    if xyz.shape[1] != len(labels):
+        raise InputError(f"{path}: {xyz.shape[1]} points but {len(labels)} labels")
+    xyz, zeros = zeros_as_gaps(xyz)
+    if zeros:
+        notes.append(f"{zeros} points at exactly (0, 0, 0) read as gaps")
+    n = xyz.shape[0]
+    return MarkerData(
+        labels=tuple(labels), times=np.arange(n) / rate, xyz=xyz * scale, rate=rate,
+        units=units, source=str(path), notes=tuple(notes),
+    )
