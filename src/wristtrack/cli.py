@@ -205,12 +205,27 @@ def _positive_int(text: str) -> int:
     return value
 
 
+class _Version(argparse.Action):
+    """``--version``: the version and which tracker step runs (compiled or the generic path);
+    numba is loaded only when this is asked for."""
+
+    def __init__(self, option_strings, dest, **_):
+        super().__init__(option_strings, dest, nargs=0,
+                         help="show the version and which tracker step runs, then exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from wristtrack.tracking.compiled import describe
+
+        print(f"wristtrack {__version__}\ntracker step: {describe()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="wristtrack",
         description="6-DoF wrist pose from one RGB-D camera and six blue markers on the hand.",
     )
-    parser.add_argument("--version", action="version", version=f"wristtrack {__version__}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser(
