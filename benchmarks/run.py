@@ -23,7 +23,7 @@ from wristtrack import __version__
 from wristtrack.sim.detections import NoiseModel, acceptance_noise, simulate_detections
 from wristtrack.sim.motion import SCENARIOS, scenario
 from wristtrack.sim.scenario_run import track_scenario
-from wristtrack.tracking import compiled as fast_kernel
+from wristtrack.tracking import compiled
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.observation import MarkerObservation
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
@@ -245,7 +245,7 @@ def _summary(step: StepTiming, f: dict) -> list[str]:
         f"; {step.stonesoup_ms / step.ours_ms:.0f}x faster than the Stone Soup tracker's step "
         "(which also associates)" if step.stonesoup_ms else ""
     )
-    kind = "numba-compiled" if fast_kernel.compiled_step() is not None else "NumPy"
+    kind = "numba-compiled" if compiled.load() is not None else "generic NumPy"
     lines.append(
         f"- Speed: a tracker step ({kind}) is {ratio:.1f}x faster than FilterPy's UKF on the same "
         "model "

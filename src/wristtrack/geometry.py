@@ -1,12 +1,16 @@
 """Rotations and rigid motions: SO(3)/SE(3) exp/log, quaternions, Euler and wrist angles.
 
-Pure NumPy, float64, vectorised over any leading axes ("..."). Conventions (DESIGN.md section 2):
-quaternions are (w, x, y, z) with w >= 0; an SE(3) tangent vector is xi = (rho, phi), translation
-part first; Euler sequences are intrinsic and uppercase, with scipy's ``Rotation.from_euler``
-meaning; ``wrist_angles`` is the ISB intrinsic Y-Z-X decomposition in hand axes.
+Pure NumPy, float64, vectorised over any leading axes ("..."), except the single-quaternion
+helpers ``*_into``, which the compiled tracker step compiles as they are. Conventions (DESIGN.md
+section 2): quaternions are (w, x, y, z) with w >= 0; an SE(3) tangent vector is xi = (rho, phi),
+translation part first; Euler sequences are intrinsic and uppercase, with scipy's
+``Rotation.from_euler`` meaning; ``wrist_angles`` is the ISB intrinsic Y-Z-X decomposition in
+hand axes.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -297,6 +301,68 @@ def matrix_from_quat(q: np.ndarray) -> np.ndarray:
         ],
         -2,
     )
+
+
+# ----------------------------------------------------------------- single quaternions, in place
+# One rotation at a time, for the compiled tracker step: plain loops and arithmetic on float64
+# arrays, results written into ``out``, so that numba compiles these very functions
+# (tracking/compiled.py) and the Python interpreter runs them as they are. Hamilton convention,
+# (w, x, y, z), R(p q) = R(p) R(q); no sign canonicalisation (the filter composes them).
+
+
+def quat_exp_into(x: float, y: float, z: float, out: np.ndarray) -> None:
+    """Unit quaternion of the rotation vector (x, y, z) into out (4,); exact at zero (the
+    1e-300 keeps h > 0, and sin(h) / h is exact for tiny h)."""
+    h = 0.5 * math.sqrt(x * x + y * y + z * z + 1e-300)
+    s = 0.5 * math.sin(h) / h
+    out[0] = math.cos(h)
+    out[1] = s * x
+    out[2] = s * y
+    out[3] = s * z
+
+
+def quat_mul_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """out = a b (out must not be a or b)."""
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
+    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
+    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
+    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+
+
+def quat_of_rotation_into(r: np.ndarray, out: np.ndarray) -> None:
+    """Unit quaternion of the row-major rotation r[:9] into out (4,), by Shepperd's method (as
+    ``quat_from_matrix``, for one rotation and without fixing the sign)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
+        r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8]
+    )  # fmt: skip
+    tr = r00 + r11 + r22
+    if tr >= r00 and tr >= r11 and tr >= r22:
+        s = 2.0 * math.sqrt(1.0 + tr)  # 4w
+        out[0], out[1], out[2], out[3] = 0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s
+    elif r00 >= r11 and r00 >= r22:
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r00 - tr)  # 4x
+        out[0], out[1], out[2], out[3] = (r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s
+    elif r11 >= r22:
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r11 - tr)  # 4y
+        out[0], out[1], out[2], out[3] = (r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r22 - tr)  # 4z
+        out[0], out[1], out[2], out[3] = (r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s
+
+
+def rotation_of_quat_into(q: np.ndarray, R: np.ndarray) -> None:
+    """Rotation matrix of the unit quaternion q (4,) into R (3, 3) (``matrix_from_quat`` for one
+    quaternion already of unit norm)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R[0, 0] = w * w + x * x - y * y - z * z
+    R[0, 1] = 2 * (x * y - w * z)
+    R[0, 2] = 2 * (x * z + w * y)
+    R[1, 0] = 2 * (x * y + w * z)
+    R[1, 1] = w * w - x * x + y * y - z * z
+    R[1, 2] = 2 * (y * z - w * x)
+    R[2, 0] = 2 * (x * z - w * y)
+    R[2, 1] = 2 * (y * z + w * x)
+    R[2, 2] = w * w - x * x - y * y + z * z
 
 
 # -------------------------------------------------------------------------------- Euler angles

@@ -23,8 +23,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg.blas import dtrsm
-from scipy.linalg.lapack import dpotrf
 from scipy.optimize import linear_sum_assignment
 from scipy.special import chdtri
 
@@ -157,77 +155,15 @@ def labels_from_marginals(beta: np.ndarray) -> np.ndarray:
     return labels
 
 
-class BlockGate:
-    """GNN association of blobs to markers with full (pixel + depth) measurements in a handful of
-    whole-array operations: the tracker's hot path (``log_likelihood_ratios``, ``gate``,
-    ``pair_scores`` and ``associate_gnn`` are the reference, and this gives the same pairs).
-
-    The innovation covariance comes as the whole (3J, 3J) matrix with axis-major rows (u of each
-    marker, then v, then z); marker j's block is rows {j, J + j, 2J + j}. Keeping only those
-    blocks gives a matrix whose Cholesky factor is the blocks' factors in place (each block's
-    rows keep their order, so no fill-in), so one factorisation and one triangular solve whiten
-    every (blob, marker) difference at once.
-    """
-
-    def __init__(self, n_markers: int, params: AssociationParams):
-        J = n_markers
-        self.n_markers = J
-        self._sum_blocks = np.tile(np.eye(J), (1, 3))  # (J, 3J): sums marker j's three rows
-        self._mask = self._sum_blocks.T @ self._sum_blocks  # 1 inside a marker's block
-        density = 1.0 / (params.image_area * params.depth_range)
-        # -score = m2 / 2 + log(det S_j) / 2 + (3/2) log(2 pi) + log(density)
-        #          - log(P_D / ((1 - P_D) lambda_c)),   with log(det S_j) / 2 = sum log diag L_j
-        # the parts of -score that do not depend on the blob (c_j without log det S_j / 2)
-        self.constant = (
-            1.5 * math.log(2 * math.pi)
-            + math.log(density)
-            - math.log(params.p_detect / ((1 - params.p_detect) * params.clutter_rate))
-        )
-        self.half_gate = 0.5 * _gate_limit(params.gate_prob, 3)  # on half squared distances
-
-    def distances(self, S: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, list[float]] | None:
-        """Half squared Mahalanobis distances (J, M) of every blob to every marker and each
-        marker's constant c_j, so that -score_ij = d_ij + c_j.
-
-        S (3J, 3J) innovation covariance, D (3J, M) the differences z_i - y_j in S's row order.
-        None where a marker's block is not positive definite (the caller falls back).
-        """
-        L, info = dpotrf(S * self._mask, lower=1)
-        if info:
-            return None
-        W = dtrsm(math.sqrt(0.5), L, D, lower=1)  # L^-1 D / sqrt(2)
-        d, J, c = L.diagonal().tolist(), self.n_markers, self.constant
-        return self._sum_blocks.dot(W * W), [
-            math.log(d[j] * d[J + j] * d[2 * J + j]) + c for j in range(J)
-        ]
-
-    def assign(self, half_m2: np.ndarray, constants: list[float]) -> list[tuple[int, int]]:
-        """``associate_gnn``'s assignment as (marker, blob) pairs sorted by marker.
-
-        The cost of a pair is min(-score, 0) where gated, else 0, so within a marker's row the
-        nearest blob is the cheapest; when the markers that want a blob each want a different
-        one, that is the optimal assignment (every marker gets its own minimum, a lower bound
-        for any assignment) and the solver only runs when markers compete.
-        """
-        nearest = half_m2.argmin(axis=1).tolist()
-        rows, gate = half_m2.tolist(), self.half_gate
-        d = [row[b] for row, b in zip(rows, nearest, strict=True)]
-        pairs = [
-            (j, b)
-            for j, (b, dj, c) in enumerate(zip(nearest, d, constants, strict=True))
-            if dj <= gate and dj + c < 0
-        ]
-        # a NaN distance (argmin finds it first) or two markers wanting one blob: solve
-        if math.isnan(sum(d)) or len({b for _, b in pairs}) < len(pairs):
-            return self._solve(half_m2, constants)
-        return pairs
-
-    def _solve(self, half_m2: np.ndarray, constants: list[float]) -> list[tuple[int, int]]:
-        cost = half_m2 + np.array(constants)[:, None]
-        # fmin, not minimum: a NaN cost (a NaN distance is never gated) becomes 0, not NaN
-        np.fmin(cost, 0.0, out=cost)
-        cost *= half_m2 <= self.half_gate
-        blobs, markers = linear_sum_assignment(cost.T)
-        rows = cost.tolist()
-        pairs = zip(markers.tolist(), blobs.tolist(), strict=True)
-        return sorted((j, b) for j, b in pairs if rows[j][b] < 0)
+def full_measurement_constants(params: AssociationParams) -> tuple[float, float]:
+    """For pixel + depth measurements (k = 3): the part of -pair_score that depends on neither
+    the blob nor the marker, c, and the gate on half squared distances, g. Then
+    -pair_score_ij = m2_ij / 2 + log(det S_j) / 2 + c, and the pair is gated where
+    m2_ij / 2 <= g: the form the compiled tracker step scores pairs in."""
+    density = 1.0 / (params.image_area * params.depth_range)
+    constant = (
+        1.5 * math.log(2 * math.pi)
+        + math.log(density)
+        - math.log(params.p_detect / ((1 - params.p_detect) * params.clutter_rate))
+    )
+    return constant, 0.5 * _gate_limit(params.gate_prob, 3)

@@ -10,10 +10,6 @@ Process noise that enters non-linearly is appended to the state (the augmented U
 Uhlmann, as the paper uses): sigma points are drawn jointly over (state error, noise) and the
 model's ``propagate(X, noise, dt)`` receives both. Every function handles all sigma points in
 one vectorised call.
-
-``SigmaColumns`` and ``joint_correct`` are the same filter for a hot path that runs a frame in a
-few dozen NumPy calls: sigma points as columns, buffers made once, and the correction computed
-from one joint covariance of measurement and state.
 """
 
 from __future__ import annotations
@@ -256,83 +252,6 @@ def cholesky_whiten(S: np.ndarray, B: np.ndarray, alpha: float = 1.0) -> np.ndar
     if L is not None:
         return dtrsm(alpha, L, B, lower=1)
     return alpha * np.linalg.solve(safe_cholesky(S), B)
-
-
-class SigmaColumns:
-    """The augmented unscented transform with the sigma points as columns, for one dimension.
-
-    The tracker's hot path pushes a frame's 37 sigma points through the model in a few dozen
-    whole-array operations; with arrays this small the cost is the number of NumPy calls, so the
-    constant parts (weights, noise offsets, buffers) are made once here and the points are
-    columns, which puts all of them in each call's inner loop.
-
-    ``offsets`` (n + q + 1, S) holds the sigma points' offsets from the mean in the order 0,
-    +columns of chol(P), -columns, +noise, -noise (the textbook set, reordered); the noise rows
-    are in units of the noise's standard deviation (the model scales them), and the last row is
-    all ones so a model can add its state-dependent constants in the same matrix product.
-    """
-
-    def __init__(self, n: int, q: int, params: UKFParams = UKFParams()):
-        self.n, self.q = n, q
-        w = sigma_weights(n + q, params.alpha, params.beta, params.kappa)
-        self.mean_weights, self.cov_weights, self.scale = w.mean, w.cov, w.scale
-        S = 2 * (n + q) + 1
-        self.offsets = np.zeros((n + q + 1, S))
-        self.offsets[n + q] = 1.0
-        for i in range(q):
-            self.offsets[n + i, 1 + 2 * n + i] = w.scale
-            self.offsets[n + i, 1 + 2 * n + q + i] = -w.scale
-        self._state_offsets = self.offsets[:n, 1 : 1 + 2 * n].reshape(n, 2, n)
-        self._signs = np.array([w.scale, -w.scale])[None, :, None]
-        self._centred: np.ndarray | None = None
-        self._weighted: np.ndarray | None = None
-
-    def set_covariance(self, P: np.ndarray) -> None:
-        """State offsets +-scale * L for the factor L of the state covariance P (n, n)."""
-        L, info = dpotrf(P, lower=1)
-        if info:
-            L = safe_cholesky(P)
-        np.multiply(L[:, None, :], self._signs, out=self._state_offsets)
-
-    def moments(self, W: np.ndarray, cov: np.ndarray) -> np.ndarray:
-        """Weighted means (m,) of the rows of W (m, S); their covariance goes into cov[:, :m].
-
-        cov is (m, m + 1): its last column comes out zero, a free slot for the caller (the
-        innovation, see ``joint_correct``).
-        """
-        m = W.shape[0]
-        if self._centred is None or self._centred.shape[0] != m + 1:
-            self._centred = np.zeros((m + 1, W.shape[1]))  # last row stays zero
-            self._weighted = np.empty((m, W.shape[1]))
-        means = W.dot(self.mean_weights)
-        Z = self._centred
-        np.subtract(W, means[:, None], out=Z[:m])
-        np.multiply(Z[:m], self.cov_weights, out=self._weighted).dot(Z.T, out=cov)
-        return means
-
-
-def joint_correct(
-    C: np.ndarray, m: int, rows: list[int] | None
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """Kalman correction from the joint covariance of [measurement (m); tangent (n)].
-
-    C is (m + n, m + n + 1) as ``SigmaColumns.moments`` leaves it, with the measurement noise
-    added on the measurement block's diagonal and the innovation z - y of the measured rows
-    written into the free last column; ``rows`` selects the measured rows (None: all m). As in
-    ``update``: with S = L L^T, [A | e] = L^-1 [Pyx | nu] in one triangular solve, and
-    [A | e]^T [A | e] holds K S K^T = A^T A, the correction K nu = A^T e and the NIS e^T e.
-    Returns (dx, P, NIS).
-    """
-    n = C.shape[0] - m
-    if rows is None:
-        S, rhs = C[:m, :m], C[:m, m:]
-    else:
-        sub = C.take(rows, axis=0)
-        S, rhs = sub.take(rows, axis=1), sub[:, m:]
-    Ae = cholesky_whiten(S, rhs)
-    G = Ae.T.dot(Ae)
-    P = C[m:, m : m + n] - G[:n, :n]
-    return G[:n, n], symmetrise(P), float(G[n, n])
 
 
 class EuclideanModel:

@@ -1,64 +1,75 @@
-"""The tracker's fast step as one compiled function (numba; optional: ``wristtrack[fast]``).
+"""The tracker's step for the default configuration as one compiled function (numba).
 
-``tracker._FastStep`` in NumPy is already a few dozen whole-array calls, and with a frame's
-arrays this small (37 sigma points, 12-D tangent, 6 markers x 3 measurements) those calls'
-overhead is nearly all of its cost. This is the same computation written as plain loops and
-compiled, so a frame is one call: the augmented sigma points, their propagation and lifts
-(``motion.SigmaPropagator``), the marker measurements (``MarkerObservation.measure_columns``),
-the joint moments (``ukf.SigmaColumns``), the visibility test, the block-Cholesky gate and
-nearest-blob assignment (``associate.BlockGate``) and the joint Cholesky correction
-(``ukf.joint_correct``). Equal to the NumPy path to rounding (tests/test_fast_path.py).
+The same filter as the generic path (``Tracker._generic_frame``, the reference, which reads like
+the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
+chi-square gate and Cholesky correction, for the constant-rate model with pixel + depth
+measurements on an undistorted camera. A frame's arrays are tiny (37 sigma points, 12-D
+tangent, 6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost;
+here the frame is one call of plain loops. Equal to the generic step to rounding
+(tests/tracking/test_compiled.py).
 
-Only the common frame is handled here. The compiled step returns DECLINED, having changed
-nothing, where the NumPy path has a branch this does not copy: a covariance that is not
-positive definite (its Cholesky fallbacks), a marker out of view (the generic path), a NaN
-distance or two markers wanting one blob (the assignment solver). The caller then runs the NumPy
-path, the reference, on the same frame.
+Only the common frame is handled here. The step returns DECLINED, having changed nothing, where
+the generic path has a branch this does not copy: a covariance that is not positive definite
+(its Cholesky fallbacks), a marker out of view, a NaN distance or two markers wanting one blob
+(the assignment solver). The tracker then runs the generic path on the same frame.
 
-Without numba, ``AVAILABLE`` is False and the tracker uses the NumPy path only. The compiled
-code is cached on disk (numba ``cache=True``, in ``__pycache__`` beside this file), so only the
-first process after a change pays the compile (about 10-15 s of CPU); later ones load it (~1 s).
+``load`` imports numba and compiles the step on first use (importing wristtrack does not import
+numba). The compiled code is cached on disk (numba ``cache=True``: ``__pycache__`` beside this
+file, or numba's user-wide cache directory when the package folder is read-only), so one
+process per machine pays the compile (~15 s of CPU) and later ones load it (~1 s). The cache
+is keyed on this file: after editing a helper it compiles from geometry.py or depth_noise.py,
+delete the cache (``__pycache__/compiled._step-*.nb*``) so the step is compiled afresh. Where
+numba cannot be imported or cannot compile, ``load`` returns None and says why
+(``describe``); the generic path then takes every frame.
 """
 
 from __future__ import annotations
 
 import math
-from importlib.util import find_spec
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from wristtrack.camera import Camera
-    from wristtrack.tracking.models import ProcessNoise
-    from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.depth_noise import depth_sigma
+from wristtrack.filter import associate as assoc
+from wristtrack.filter import ukf
+from wristtrack.geometry import (
+    quat_exp_into,
+    quat_mul_into,
+    quat_of_rotation_into,
+    rotation_of_quat_into,
+)
 
-# numba is optional and imported only when a tracker first takes the fast path (importing it
-# costs about a second); without it the NumPy path, the reference, does the work
-AVAILABLE = find_spec("numba") is not None
+if TYPE_CHECKING:
+    from wristtrack.tracking.models import ConstantRateModel
+    from wristtrack.tracking.observation import MarkerObservation
 
 OK = 0  # the frame is done: the outputs are valid
-DECLINED = 1  # the NumPy path must take this frame (see the module's docstring)
+DECLINED = 1  # the generic path must take this frame (see the module's docstring)
 
-# Layout of the ``par`` vector of constants (built by ``constants``).
+# Layout of the ``par`` vector of constants (built by ``frame_constants``).
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE, _N_PAR,
 ) = range(16)  # fmt: skip
 
 
-def constants(
-    scale: float,
-    camera: Camera,
-    noise: MeasurementNoise,
-    process: ProcessNoise,
+def frame_constants(
+    model: ConstantRateModel,
+    obs: MarkerObservation,
+    ukf_params: ukf.UKFParams,
     facing_cos: float,
-    gate_constant: float,
-    half_gate: float,
-) -> np.ndarray:
-    """The scalar constants of the step as one array (one argument for the compiled call)."""
+    assoc_params: assoc.AssociationParams,
+) -> tuple:
+    """The step's arguments after (x, P, dt, uv, depth) for one tracker (fixed W0 and layout):
+    layout (J, 3), R_c0, t_c0, the unscented weights and the scalar constants ``par``."""
+    n = model.dim + model.noise_dim
+    w = ukf.sigma_weights(n, ukf_params.alpha, ukf_params.beta, ukf_params.kappa)
+    gate_constant, half_gate = assoc.full_measurement_constants(assoc_params)
+    camera, noise, process = obs.camera, obs.noise, model.noise
     par = np.empty(_N_PAR)
-    par[_SCALE] = scale
+    par[_SCALE] = w.scale
     par[_FX], par[_FY], par[_CX], par[_CY] = camera.fx, camera.fy, camera.cx, camera.cy
     par[_U_MAX], par[_V_MAX] = camera.width - 0.5, camera.height - 0.5
     par[_PIXEL_VAR] = noise.pixel_sigma**2
@@ -67,61 +78,16 @@ def constants(
     par[_SQRT_QW] = math.sqrt(process.angular_accel)
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
-    return par
+    # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments)
+    layout = np.ascontiguousarray(obs.layout_T.T)
+    R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
+    return layout, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
 
 
 # ------------------------------------------------------------------------ small helpers
-# The same formulas as motion.quat_* (Hamilton convention, (w, x, y, z)), on arrays of 4.
-
-
-def _quat_exp(x, y, z, out):
-    h = 0.5 * math.sqrt(x * x + y * y + z * z + 1e-300)
-    s = 0.5 * math.sin(h) / h
-    out[0] = math.cos(h)
-    out[1] = s * x
-    out[2] = s * y
-    out[3] = s * z
-
-
-def _quat_mul(a, b, out):
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
-
-
-def _quat_of_matrix(x, q):
-    """motion.quat_of_matrix (Shepperd's method) of the row-major rotation in x[:9]."""
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
-        x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8]
-    )  # fmt: skip
-    tr = r00 + r11 + r22
-    if tr >= r00 and tr >= r11 and tr >= r22:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q[0], q[1], q[2], q[3] = 0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s
-    elif r00 >= r11 and r00 >= r22:
-        s = 2.0 * math.sqrt(1.0 + 2.0 * r00 - tr)
-        q[0], q[1], q[2], q[3] = (r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s
-    elif r11 >= r22:
-        s = 2.0 * math.sqrt(1.0 + 2.0 * r11 - tr)
-        q[0], q[1], q[2], q[3] = (r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s
-    else:
-        s = 2.0 * math.sqrt(1.0 + 2.0 * r22 - tr)
-        q[0], q[1], q[2], q[3] = (r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s
-
-
-def _quat_to_matrix(q, R):
-    """motion.quat_to_matrix into R (3, 3)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R[0, 0] = w * w + x * x - y * y - z * z
-    R[0, 1] = 2 * (x * y - w * z)
-    R[0, 2] = 2 * (x * z + w * y)
-    R[1, 0] = 2 * (x * y + w * z)
-    R[1, 1] = w * w - x * x + y * y - z * z
-    R[1, 2] = 2 * (y * z - w * x)
-    R[2, 0] = 2 * (x * z - w * y)
-    R[2, 1] = 2 * (y * z + w * x)
-    R[2, 2] = w * w - x * x - y * y + z * z
+# The quaternion helpers are geometry's (``*_into``), compiled by ``load``; the depth noise is
+# depth_noise.depth_sigma. These two are the step's own: LAPACK's dpotrf and a triangular solve
+# on the tiny blocks of one frame, where a call into LAPACK would cost more than the arithmetic.
 
 
 def _cholesky(A, L):
@@ -168,7 +134,8 @@ def _step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par):
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance; dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite); layout (J, 3) the markers in the hand
     frame; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 sigma
-    points ordered as ukf.SigmaColumns; par the constants (``constants``).
+    points ordered 0, +columns of L, -columns of L, +noise, -noise (the weights of all but the
+    first are equal, so this is ukf.sigma_offsets' set); par the constants (``frame_constants``).
     """
     n, M, m = 12, uv.shape[0], 3 * layout.shape[0]
     labels = np.empty(M, dtype=np.int64)
@@ -218,8 +185,8 @@ def _step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par):
 
 def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
     """The augmented sigma points retracted, propagated, measured and lifted (the rows of W),
-    as SigmaPropagator and MarkerObservation.measure_columns; qs, qc get the state's orientation
-    and the centre's turn."""
+    as ConstantRateModel.retract, propagate and lift and MarkerObservation.__call__; qs, qc get
+    the state's orientation and the centre's turn."""
     J, n, S = layout.shape[0], 12, W.shape[0]
     m = 3 * J
     scale = par[_SCALE]
@@ -229,8 +196,8 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
     sw_w = par[_SQRT_QW] * sqdt
     sw_turn = 0.5 * sw_w * dt  # the midpoint rate's share of the turn
     fx, fy, cx, cy = par[_FX], par[_FY], par[_CX], par[_CY]
-    _quat_of_matrix(x, qs)
-    _quat_exp(x[15] * dt, x[16] * dt, x[17] * dt, qc)  # the centre turns by w dt
+    quat_of_rotation_into(x, qs)
+    quat_exp_into(x[15] * dt, x[16] * dt, x[17] * dt, qc)  # the centre turns by w dt
     qc[1:] = -qc[1:]  # conj(q_centre): sigma rotations relative to the centre's
     off = np.empty(n + 6)  # the sigma point's tangent offset and noise offset
     r = np.empty(4)
@@ -239,7 +206,7 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
     o = np.empty(4)
     R = np.empty((3, 3))
     for s in range(S):
-        # the order of ukf.SigmaColumns: 0, +scale L[:, k], -scale L[:, k], +noise, -noise
+        # 0, +scale L[:, k], -scale L[:, k], +noise, -noise (noise in units of its sigma)
         for i in range(n + 6):
             off[i] = 0.0
         if 1 <= s <= n:
@@ -259,24 +226,24 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
             W[s, m + 9 + i] = off[9 + i] + sw_w * off[15 + i]
         # orientation t r q_state: retraction r = exp(dphi), turn t = exp(dt (w + dw) + the
         # midpoint share of the angular acceleration)
-        _quat_exp(off[0], off[1], off[2], r)
-        _quat_exp(
+        quat_exp_into(off[0], off[1], off[2], r)
+        quat_exp_into(
             dt * (x[15] + off[9]) + sw_turn * off[15],
             dt * (x[16] + off[10]) + sw_turn * off[16],
             dt * (x[17] + off[11]) + sw_turn * off[17],
             t,
         )
-        _quat_mul(t, r, tr)
-        _quat_mul(tr, qs, o)
+        quat_mul_into(t, r, tr)
+        quat_mul_into(tr, qs, o)
         # log of the rotation relative to the centre's, t r conj(q_centre) (right for either
-        # sign of its w, as SigmaPropagator._lift_rotations)
-        _quat_mul(tr, qc, r)
+        # sign of its w: a w < 0 quaternion is the same rotation as -q, whose angle is < pi)
+        quat_mul_into(tr, qc, r)
         nv = math.sqrt(1e-300 * r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3])
         k = 2.0 * math.atan(nv / r[0]) / nv
         for i in range(3):
             W[s, m + i] = r[1 + i] * k
         # the markers seen from the camera: R_c0 (R(o) T_j + p') + t_c0, projected
-        _quat_to_matrix(o, R)
+        rotation_of_quat_into(o, R)
         px = x[9] + dt * x[12] + W[s, m + 3]
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
@@ -324,9 +291,9 @@ def _predicted(x, dt, lift, qs, qc, q, pvw):
     """The predicted state: the mean lift retracted about the propagated centre."""
     g = np.empty(4)
     e = np.empty(4)
-    _quat_mul(qc, qs, g)
-    _quat_exp(lift[0], lift[1], lift[2], e)
-    _quat_mul(e, g, q)
+    quat_mul_into(qc, qs, g)
+    quat_exp_into(lift[0], lift[1], lift[2], e)
+    quat_mul_into(e, g, q)
     for i in range(3):
         pvw[i] = x[9 + i] + dt * x[12 + i] + lift[3 + i]
         pvw[3 + i] = x[12 + i] + lift[6 + i]
@@ -334,9 +301,9 @@ def _predicted(x, dt, lift, qs, qc, q, pvw):
 
 
 def _all_visible(q, pvw, layout, R_c0, t_c0, par):
-    """MarkerObservation.all_visible: every marker in front, facing the camera, on the sensor."""
+    """Tracker._expected_markers for all markers: in front, facing the camera, on the sensor."""
     R = np.empty((3, 3))
-    _quat_to_matrix(q, R)
+    rotation_of_quat_into(q, R)
     Rc = np.empty((3, 3))
     tc = np.empty(3)
     for i in range(3):
@@ -359,21 +326,21 @@ def _all_visible(q, pvw, layout, R_c0, t_c0, par):
 
 
 def _add_noise(C, mean, J, par):
-    """MarkerObservation.noise_variances added to the measurement block's diagonal."""
+    """MarkerObservation.noise_variance added to the measurement block's diagonal."""
     for i in range(2 * J):
         C[i, i] += par[_PIXEL_VAR]
     for j in range(J):
-        sd = par[_DEPTH_COEFF] * mean[2 * J + j] * mean[2 * J + j]
-        if not sd > par[_DEPTH_FLOOR]:
-            sd = par[_DEPTH_FLOOR]
+        sd = depth_sigma(mean[2 * J + j], par[_DEPTH_COEFF], par[_DEPTH_FLOOR])
         C[2 * J + j, 2 * J + j] += sd * sd
 
 
 def _associate(C, mean, uv, depth, par, labels, blob_of):
-    """BlockGate.distances and .assign: each marker's nearest blob (half squared Mahalanobis
-    distance) where gated and likelier than clutter. Fills labels (blob -> marker) and blob_of
-    (marker -> blob or -1); returns the number of pairs, or -1 where two markers want one blob
-    or a distance is NaN (the NumPy path then runs the assignment solver) or a marker's block is
+    """associate.gate and associate_gnn for full measurements: each marker's nearest blob (half
+    squared Mahalanobis distance) where gated and likelier than clutter. Nearest blobs that are
+    all different are the optimal assignment (each marker has its own minimum), so the solver
+    is only needed when markers compete. Fills labels (blob -> marker) and blob_of (marker ->
+    blob or -1); returns the number of pairs, or -1 where two markers want one blob or a
+    distance is NaN (the generic path then runs the assignment solver) or a marker's block is
     not positive definite."""
     J, M = blob_of.shape[0], uv.shape[0]
     B = np.empty((3, 3))
@@ -409,7 +376,7 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
 
 
 def _correct(C, mean, uv, depth, blob_of, n_pairs, q, pvw, P_out):
-    """ukf.joint_correct with the associated markers' rows (axis-major, in marker order) and
+    """ukf.update with the associated markers' rows (axis-major, in marker order) and
     the retraction of the correction into (q, pvw); P_out gets the covariance. Returns the NIS,
     NaN where the innovation covariance is not positive definite."""
     J, n = blob_of.shape[0], 12
@@ -454,8 +421,8 @@ def _correct(C, mean, uv, depth, blob_of, n_pairs, q, pvw, P_out):
             P_out[c, i] = t
     e = np.empty(4)
     g = np.empty(4)
-    _quat_exp(G[0, n], G[1, n], G[2, n], e)
-    _quat_mul(e, q, g)
+    quat_exp_into(G[0, n], G[1, n], G[2, n], e)
+    quat_mul_into(e, q, g)
     q[:] = g
     for i in range(9):
         pvw[i] += G[3 + i, n]
@@ -468,7 +435,7 @@ def _write_state(q, pvw, out):
     for i in range(4):
         q[i] *= s
     R = np.empty((3, 3))
-    _quat_to_matrix(q, R)
+    rotation_of_quat_into(q, R)
     for i in range(3):
         for j in range(3):
             out[3 * i + j] = R[i, j]
@@ -476,36 +443,80 @@ def _write_state(q, pvw, out):
         out[9 + i] = pvw[i]
 
 
-_compiled = None
+# ----------------------------------------------------------------------------- loading
+
+_loaded: tuple[Callable | None, str] | None = None  # (the compiled step or None, description)
 
 
-def compiled_step():
-    """The compiled ``_step``, or None without numba. numba is imported and the functions
-    wrapped on the first call; the compilation itself happens on the step's first call (or is
-    loaded from numba's on-disk cache)."""
-    global _compiled, AVAILABLE
-    if not AVAILABLE:
-        return None
-    if _compiled is None:
-        try:
-            import numba
-        except ImportError:  # installed but unusable (e.g. built for another NumPy)
-            AVAILABLE = False
-            return None
-        # no fastmath: the results must equal the NumPy path's to rounding, and NaN tests work.
-        # The helpers become dispatchers under their own names, which is how _step finds them;
-        # numpy's error model: a division by zero gives inf or NaN as in the NumPy path (which the
-        # checks then catch) instead of raising. Only _step is cached: its object code holds the
-        # helpers it calls.
-        module = globals()
-        for name in _HELPERS:
-            module[name] = numba.njit(nogil=True, error_model="numpy")(module[name])
-        _compiled = numba.njit(cache=True, nogil=True, error_model="numpy")(_step)
-    return _compiled
+def load() -> Callable | None:
+    """The compiled step, or None where numba cannot be imported or cannot compile it (the
+    tracker then takes the generic path). The first call in a process imports numba and
+    compiles the step or loads it from the on-disk cache; later calls return it at once."""
+    global _loaded
+    if _loaded is None:
+        _loaded = _compile()
+    return _loaded[0]
+
+
+def describe() -> str:
+    """Which step the tracker runs, for ``wristtrack --version``: "compiled (numba 0.61.0)" or
+    "generic NumPy reference (numba not available: <reason>)". Loads the step (see ``load``)."""
+    load()
+    return _loaded[1]
+
+
+def _compile() -> tuple[Callable | None, str]:
+    try:
+        import numba
+    except Exception as err:  # ImportError, or a numba built for another NumPy failing to load
+        return None, f"generic NumPy reference (numba not available: {_first_line(err)})"
+    version = numba.__version__
+    try:
+        step = _jit(numba)
+        step(*_warm_up_arguments())  # compile now (or load the cache), not in the first frame
+    except Exception as err:  # a numba that cannot compile this code: the generic path works
+        reason = f"numba {version} could not compile the step: {_first_line(err)}"
+        return None, f"generic NumPy reference ({reason})"
+    return step, f"compiled (numba {version})"
+
+
+def _jit(numba) -> Callable:
+    """Compile the helpers under the names _step calls them by, then _step itself.
+
+    No fastmath: the results must equal the generic path's to rounding, and the NaN tests must
+    work. numpy's error model: a division by zero gives inf or NaN as in NumPy (which the checks
+    then catch) instead of raising. Only _step is cached: its object code holds the helpers.
+    """
+    module = globals()
+    for name in _HELPERS:
+        module[name] = numba.njit(nogil=True, error_model="numpy")(module[name])
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy")(_step)
+    except RuntimeError:  # no writable cache directory anywhere: compile in every process
+        return numba.njit(nogil=True, error_model="numpy")(_step)
+
+
+def _warm_up_arguments() -> tuple:
+    """Arguments of the types the tracker passes (C-contiguous float64, writable), so the
+    compile done here is the one every frame uses."""
+    layout = np.array([[0.0, 0.0, 0.0], [0.03, 0.04, 0.0], [0.08, 0.02, 0.0],
+                       [0.09, 0.0, 0.0], [0.085, -0.02, 0.0], [0.075, -0.035, 0.0]])  # fmt: skip
+    x = np.zeros(18)
+    x[[0, 4, 8]] = 1.0
+    par = np.zeros(_N_PAR)
+    par[[_SCALE, _FX, _FY, _U_MAX, _V_MAX, _PIXEL_VAR]] = 1.0, 500.0, 500.0, 640.0, 480.0, 0.5
+    weights = np.full(37, 1.0 / 37)
+    return (x, np.eye(12) * 1e-4, 1.0 / 30, np.zeros((1, 2)), np.ones(1), layout, np.eye(3),
+            np.array([0.0, 0.0, 0.6]), weights, weights.copy(), par)  # fmt: skip
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip().splitlines()
+    return f"{type(err).__name__}: {text[0]}" if text else type(err).__name__
 
 
 _HELPERS = (
-    "_quat_exp", "_quat_mul", "_quat_of_matrix", "_quat_to_matrix", "_cholesky", "_forward",
-    "_sigma_points", "_moments", "_predicted", "_all_visible", "_add_noise", "_associate",
-    "_correct", "_write_state",
+    "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
+    "depth_sigma", "_cholesky", "_forward", "_sigma_points", "_moments", "_predicted",
+    "_all_visible", "_add_noise", "_associate", "_correct", "_write_state",
 )  # fmt: skip

@@ -7,17 +7,17 @@ squared is beyond its chi-square bound, from where it re-initialises by itself b
 layout.
 The fixed frame W0 is the hand frame of the first initialisation and never moves afterwards.
 
-A tracking frame of the default configuration takes a fast path (_FastStep) that computes the
-same filter in far fewer NumPy calls, or in one compiled call where numba is installed; every
-other configuration and every unusual frame takes the generic path (Tracker._generic_frame),
-which is the reference.
+Each tracking frame is one filter step: predict, associate, update. The generic path
+(``Tracker._generic_frame``) is the reference and reads like the paper; for the default
+configuration the same step runs as one compiled call (tracking/compiled.py, numba) where numba
+loads, and the generic path takes every other configuration and every frame the compiled step
+declines. The manoeuvre retry and the innovation-consistency (NIS) logic sit above both.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 from functools import lru_cache
 
 import numpy as np
@@ -30,26 +30,13 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import so3_log
 from wristtrack.hand import HandLayout
-from wristtrack.tracking import compiled as fast_kernel
+from wristtrack.tracking import compiled
 from wristtrack.tracking.initialise import initialise
-from wristtrack.tracking.models import (
-    MODELS,
-    ConstantRateModel,
-    ProcessNoise,
-    quat_exp,
-    quat_mul,
-    quat_normalised,
-    quat_of_matrix,
-    quat_to_matrix,
-)
+from wristtrack.tracking.models import MODELS, ConstantRateModel, ProcessNoise
 from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
+from wristtrack.tracking.results import FrameResult, Status
 
-
-class Status(StrEnum):
-    INITIALISING = "initialising"  # no estimate yet: waiting for all six markers
-    TRACKING = "tracking"  # estimate updated with this frame's markers
-    COASTING = "coasting"  # estimate predicted only: no marker associated in this frame
-    LOST = "lost"  # too long without enough markers, or innovations inconsistent: no estimate
+__all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
 
 
 @dataclass(frozen=True)
@@ -97,40 +84,6 @@ class TrackerConfig:
         return cls(model="paper", association="paper", use_depth=False, **kw)
 
 
-@dataclass(frozen=True)
-class FrameResult:
-    """The estimate for one frame. Poses are NaN where ``status`` has no estimate."""
-
-    frame: int
-    timestamp: float
-    status: Status
-    R_ch: np.ndarray  # (3,3) hand -> camera
-    t_ch: np.ndarray  # (3,) wrist in camera coordinates, m
-    R: np.ndarray  # (3,3) hand relative to W0
-    p: np.ndarray  # (3,) wrist in W0, m
-    v: np.ndarray  # (3,) m/s in W0
-    w: np.ndarray  # (3,) rad/s in W0
-    cov: np.ndarray | None  # tangent covariance of the state
-    labels: np.ndarray  # (M,) marker index per blob, -1 = clutter
-    n_visible: int  # markers associated in this frame
-    n_clutter: int  # blobs taken as clutter
-    nis: float = np.nan  # normalised innovation squared of the update
-    nis_dof: int = 0
-    pos_sigma_mm: float = np.nan  # 1-sigma position uncertainty (root of the variance trace)
-    rot_sigma_deg: float = np.nan  # 1-sigma orientation uncertainty
-    x: np.ndarray | None = None  # the filter state (model.initial_state layout); for smoothing
-    track_id: int = -1  # which initialisation this estimate descends from (0 = the first)
-    side: str = "right"  # the hand's side (from its layout): signs of the anatomical angles
-
-    @property
-    def has_estimate(self) -> bool:
-        return self.status in (Status.TRACKING, Status.COASTING)
-
-
-_NAN3 = np.full(3, np.nan)
-_NAN33 = np.full((3, 3), np.nan)
-
-
 @dataclass
 class _Track:
     x: np.ndarray
@@ -156,7 +109,8 @@ class Tracker:
         self.t_c0: np.ndarray | None = None
         self._track: _Track | None = None
         self._obs: dict[bool, MarkerObservation] = {}
-        self._fast: _FastStep | bool | None = None  # built on first use (W0 must be fixed)
+        self._compiled: tuple | None = None  # (step, its constants), built on first use
+        self._compiled_usable: bool | None = None
         self._frame = -1
         self._last_timestamp = -np.inf
         self._initialisations = 0
@@ -188,10 +142,7 @@ class Tracker:
         self.status = Status.LOST
 
     def _empty(self, det: Detections, status: Status) -> FrameResult:
-        return FrameResult(
-            self._frame, det.timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3, _NAN3,
-            None, np.full(det.count, assoc.CLUTTER), 0, det.count,
-        )
+        return FrameResult.empty(self._frame, det.timestamp, status, det.count)
 
     def _try_initialise(self, det: Detections, labels: np.ndarray | None) -> FrameResult:
         self.max_blobs_seen = max(self.max_blobs_seen, det.count)
@@ -253,8 +204,7 @@ class Tracker:
 
     def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
         """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof)."""
-        fast = self._fast_step(det)
-        out = fast.step(det, track.x, track.P, dt) if fast is not None else None
+        out = self._compiled_frame(det, track, dt)
         return self._generic_frame(det, track, dt) if out is None else out
 
     def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
@@ -274,23 +224,36 @@ class Tracker:
                 return retry
         return out
 
-    def _fast_step(self, det: Detections) -> _FastStep | None:
-        """The fast path where this configuration and frame allow it (see _FastStep)."""
-        if self._fast is None:
-            cfg = self.config
-            obs = self._observation(True)
-            usable = (
+    def _compiled_frame(self, det: Detections, track: _Track, dt: float) -> tuple | None:
+        """``_generic_frame``'s result from the compiled step, or None where this configuration
+        or frame is not one it takes (or it declines the frame, having changed nothing)."""
+        if self._compiled_usable is None:  # decided once: W0 and the layout are fixed by now
+            cfg, obs = self.config, self._observation(True)
+            self._compiled_usable = (
                 type(self.model) is ConstantRateModel
                 and cfg.association == "gnn"
                 and cfg.use_depth
-                and obs.has_column_path
+                and not self.camera.has_distortion
             )
-            self._fast = _FastStep(self.model, obs, cfg, self.assoc_params) if usable else False
-        if not self._fast or det.depth is None or det.count == 0:
+            step = compiled.load() if self._compiled_usable else None
+            if step is None:
+                self._compiled_usable = False
+            else:
+                args = compiled.frame_constants(
+                    self.model, obs, cfg.ukf, cfg.facing_cos, self.assoc_params
+                )
+                self._compiled = (step, args)
+        if not self._compiled_usable or det.depth is None or det.count == 0:
             return None
         if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
             return None
-        return self._fast
+        step, args = self._compiled
+        # contiguous blobs and a float dt: numba compiles once per argument type
+        uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
+        code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, *args)
+        if code != compiled.OK:
+            return None
+        return x, P, labels, n_pairs, nis, 3 * n_pairs
 
     def _generic_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
         """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)."""
@@ -384,9 +347,11 @@ class Tracker:
         rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum(), 0.0)))
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum(), 0.0))
         return FrameResult(
-            self._frame, det.timestamp, status, R_ch, t_ch, R_rel, p, v.copy(), w, track.P.copy(),
-            labels, n_assoc, n_clutter, nis, dof, pos_sigma, rot_sigma, track.x.copy(),
-            self._initialisations - 1, self.layout.side,
+            frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
+            R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels, n_visible=n_assoc,
+            n_clutter=n_clutter, nis=nis, nis_dof=dof, pos_sigma_mm=pos_sigma,
+            rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._initialisations - 1,
+            side=self.layout.side,
         )
 
 
@@ -427,131 +392,3 @@ def _stack_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, 
     values = z[blobs]
     ok = np.isfinite(values)
     return rows[ok], values[ok]
-
-
-class _FastStep:
-    """One tracking frame of the default configuration in a few dozen whole-array operations.
-
-    The same filter as ``Tracker._generic_frame`` (augmented UKF prediction with measurement,
-    one-to-one association, Cholesky update), arranged for speed: a frame's arrays are so small
-    that the cost is the number of NumPy calls and Python statements, not arithmetic. The 37
-    sigma points are columns of one buffer (see SigmaColumns); the model writes its propagated
-    points and lifts straight into it (SigmaPropagator), the observation its measurements, and
-    one matrix product gives the joint covariance of measurements and state. The orientation
-    is a quaternion, single poses are Python floats. Used for the constant-rate model with GNN
-    association and depth on an undistorted camera, for frames whose blobs all have depth and
-    whose markers are all expected in view; anything else goes the generic way (``step``
-    returns None before changing anything). Where numba is installed, ``step`` runs the same
-    computation as one compiled call (fast_kernel) and falls back to ``numpy_step``, the
-    reference, for the frames that call declines.
-
-    Rows of the sigma buffer (m = 3 x markers), the model's rows below the measurements:
-      [0, m)         measurements, axis-major (u of each marker, then v, then z)
-      [m, m+12)      tangent lifts (dphi, dp, dv, dw); with the measurements, the UT's input
-      [m, m+46)      SigmaPropagator's rows, among them the measurement features
-    """
-
-    def __init__(
-        self,
-        model: ConstantRateModel,
-        obs: MarkerObservation,
-        config: TrackerConfig,
-        assoc_params: assoc.AssociationParams,
-    ):
-        self.obs, self.facing_cos = obs, config.facing_cos
-        self.n_markers = n = obs.n_markers
-        self.m = m = 3 * n
-        self.dim = d = model.dim
-        self.sigma = ukf.SigmaColumns(d, model.noise_dim, config.ukf)
-        self.propagator = prop = model.sigma_propagator()
-        self.gate = assoc.BlockGate(n, assoc_params)
-        rows = np.zeros((m + prop.ROWS, self.sigma.offsets.shape[1]))
-        self._measured, self._ut_rows, self._model_rows = rows[:m], rows[: m + d], rows[m:]
-        self._features = rows[m:][prop.FEATURES]
-        self._centre_pvw = self._features[1:10, 0]  # the propagated centre's p, v, w
-        self._cov = np.empty((m + d, m + d + 1))  # joint covariance, last column free
-        self._noise = self._cov.reshape(-1)[: m * (m + d + 2) : m + d + 2]  # measured diagonal
-        # the whole step compiled (fast_kernel) where numba is installed; the NumPy code below
-        # is the reference and takes the frames the compiled step declines
-        self._kernel = fast_kernel.compiled_step()
-        self._kernel_args = self._compiled_constants(model, config) if self._kernel else None
-
-    def _compiled_constants(self, model: ConstantRateModel, config: TrackerConfig) -> tuple:
-        obs, gate, sigma = self.obs, self.gate, self.sigma
-        par = fast_kernel.constants(
-            sigma.scale, obs.camera, obs.noise, model.noise, config.facing_cos,
-            gate.constant, gate.half_gate,
-        )  # fmt: skip
-        layout = np.ascontiguousarray(obs.layout_T.T)
-        R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
-        return layout, R_c0, t_c0, sigma.mean_weights.copy(), sigma.cov_weights.copy(), par
-
-    def step(self, det: Detections, x: np.ndarray, P: np.ndarray, dt: float) -> tuple | None:
-        """(x, P, labels, markers associated, NIS, its dof) as _generic_frame, or None."""
-        if self._kernel is not None:
-            # contiguous blobs and a float dt: numba compiles once per argument type
-            uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
-            code, x_new, P_new, labels, n_pairs, nis = self._kernel(
-                x, P, float(dt), uv, depth, *self._kernel_args
-            )
-            if code == fast_kernel.OK:
-                return x_new, P_new, labels, n_pairs, nis, 3 * n_pairs
-        return self.numpy_step(det, x, P, dt)
-
-    def numpy_step(self, det: Detections, x: np.ndarray, P: np.ndarray, dt: float) -> tuple | None:
-        """``step`` in NumPy calls only: the reference for the compiled step."""
-        m, n, d, C, obs = self.m, self.n_markers, self.dim, self._cov, self.obs
-        # predict: sigma points through the motion and the measurement, one set for both
-        q_state = quat_of_matrix(x[:9].tolist())
-        self.sigma.set_covariance(P)
-        q_centre = self.propagator.propagate(
-            x, self.sigma.offsets, dt, q_state, self._model_rows
-        )
-        obs.measure_columns(self._features, self._measured)
-        means = self.sigma.moments(self._ut_rows, C)
-        y = means.tolist()
-        # the predicted state: the mean lift retracted about the propagated centre
-        q = quat_mul(quat_exp(*y[m : m + 3]), quat_mul(q_centre, q_state))
-        pvw = self._centre_pvw + means[m + 3 :]
-        if not obs.all_visible(quat_to_matrix(q), pvw[:3].tolist(), self.facing_cos):
-            return None
-        self._noise += obs.noise_variances(y)  # C's measurement block is now Pyy + R
-
-        # associate
-        D = self._differences(det, means)
-        found = self.gate.distances(C[:m, :m], D)
-        if found is None:
-            return None
-        pairs = self.gate.assign(*found)
-
-        # update with the associated markers' pixels and depths
-        M = D.shape[1]
-        labels = [assoc.CLUTTER] * M
-        if not pairs:
-            x = np.array(quat_to_matrix(quat_normalised(q)) + pvw.tolist())
-            return x, ukf.symmetrise(C[m:, m : m + d]), np.array(labels), 0, np.nan, 0
-        for j, b in pairs:
-            labels[b] = j
-        rows = [j + n * a for a in range(3) for j, _ in pairs]  # (axis, marker), axis-major
-        # z_b - y_j of each associated pair: D's column-major storage is D.T, C-contiguous
-        innovation = D.T.take([b * m + r for r, (_, b) in zip(rows, pairs * 3, strict=True)])
-        if len(pairs) == n:  # all markers, in order
-            rows = None
-            C[:m, -1] = innovation
-        else:
-            C[rows, -1] = innovation
-        dx, P, nis = ukf.joint_correct(C, m, rows)
-        q = quat_normalised(quat_mul(quat_exp(*dx[:3].tolist()), q))
-        pvw += dx[3:]
-        x = np.array(quat_to_matrix(q) + pvw.tolist())
-        return x, P, np.array(labels), len(pairs), nis, 3 * len(pairs)
-
-    def _differences(self, det: Detections, means: np.ndarray) -> np.ndarray:
-        """z_i - y_j for every blob i and measurement row j: (m, M) in the measurement's rows,
-        stored column-major (blob-major), the layout the triangular solve works in."""
-        n, M = self.n_markers, det.count
-        Dt = np.empty((M, self.m))
-        uv = Dt[:, : 2 * n].reshape(M, 2, n)
-        np.subtract(det.uv[:, :, None], means[: 2 * n].reshape(2, n), out=uv)
-        np.subtract(det.depth[:, None], means[2 * n : self.m], out=Dt[:, 2 * n :])
-        return Dt.T
