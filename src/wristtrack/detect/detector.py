@@ -46,16 +46,9 @@ from wristtrack.detect.blobs import (
     unmix_two_backgrounds_stack,
     upsample2,
 )
-from wristtrack.detect.colour import (
-    back_project,
-    backprojection_table,
-    blob_similarities,
-    gaussian_reference,
-    hs_histogram,
-    lut_scaled,
-    smooth,
-)
+from wristtrack.detect.colour import back_project, gaussian_reference, hs_histogram, smooth
 from wristtrack.detect.detections import Detections
+from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.skin import SkinModel, SkinRegion
 from wristtrack.errors import ConfigError, InputError
 
@@ -172,26 +165,35 @@ class MarkerDetector:
             raise ConfigError(
                 f"detector skin_downsample={config.skin_downsample}: must be an even number >= 2"
             )
-        self.set_reference(gaussian_reference(
+        self.colour = MarkerColour(gaussian_reference(
             config.hist_bins,
             config.marker_hue,
             config.marker_hue_sigma,
             config.marker_sat,
             config.marker_sat_sigma,
             config.min_saturation,
-        ))
-        self.reference_learned = False
+        ), config.min_value)
         self.learned_count = 0  # markers the last learn_markers call could use
+        self.adapted_count = 0  # adapt() calls that changed the colour models
         self.skin = SkinModel(config)
         self.last_blobs: list[Blob] = []
         self.last_region: SkinRegion | None = None
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
 
+    @property
+    def reference(self) -> np.ndarray:
+        """The learned marker reference histogram (H x S, peak 255), the default before."""
+        return self.colour.reference
+
+    @property
+    def reference_learned(self) -> bool:
+        return self.colour.learned is not None
+
     def set_reference(self, reference: np.ndarray) -> None:
-        """Use ``reference`` (H x S histogram, any scale) as the marker colour."""
-        self.reference = lut_scaled(reference)
-        self._table = backprojection_table(self.reference, self.config.min_value)
+        """Use ``reference`` (H x S histogram, any scale) as the learned marker colour (the
+        default stays in use beside it: see :mod:`wristtrack.detect.marker_colour`)."""
+        self.colour.set_learned(reference)
 
     # ------------------------------------------------------------------------------- frames
 
@@ -250,7 +252,7 @@ class MarkerDetector:
 
     def marker_mask(self, hsv: np.ndarray) -> np.ndarray:
         """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference."""
-        bp = back_project(hsv, self._table)
+        bp = back_project(hsv, self.colour.table)
         return cv2.threshold(bp, self.config.backproject_threshold * 255, 255,
                              cv2.THRESH_BINARY)[1]
 
@@ -290,7 +292,7 @@ class MarkerDetector:
         lab = gather(labels, wy0, wx0, (sy, sx))
         core = lab == (idx + 1).astype(labels.dtype)[:, None, None]
         # the paper's test: each blob's colour histogram against the reference
-        sims = blob_similarities(gather(hsv, wy0, wx0, (sy, sx)), core, self.reference)
+        sims = self.colour.similarities(gather(hsv, wy0, wx0, (sy, sx)), core)
         good = sims >= cfg.min_similarity
         if not good.any():
             return None
@@ -440,12 +442,45 @@ class MarkerDetector:
         if none does, the models stay as they were (:attr:`learned_count` says how many were
         used): a refinement that cannot be made must not stop a recording.
         """
+        masks = self._labelled_masks(bgr, uv, "learn_markers")
+        self.learned_count = 0 if masks is None else masks[2]
+        if masks is None:
+            return
+        marker, skin, _ = masks
+        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+        self.colour.set_learned(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
+        self.skin.learn(bgr, skin)
+
+    def adapt(self, bgr: np.ndarray, uv: np.ndarray) -> bool:
+        """Follow a slow change of the marker and skin colours from confidently labelled markers.
+
+        ``uv`` (N,2): centres of markers the tracker labelled with confidence in ``bgr`` (NaN
+        rows are skipped). Their histogram is blended into the learned marker reference and the
+        hand around them into the skin model, each with a bounded drift from what
+        :meth:`learn_markers` learned (see :mod:`wristtrack.detect.marker_colour` and
+        :meth:`wristtrack.detect.skin.SkinModel.adapt`); the default marker colour stays in use
+        beside the learned one. Needs at least 3 markers that stand out; True if a model changed.
+        """
+        masks = self._labelled_masks(bgr, uv, "adapt")
+        if masks is None or masks[2] < 3:
+            return False
+        marker, skin, _ = masks
+        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+        changed = self.colour.adapt(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
+        changed = self.skin.adapt(bgr, skin) or changed
+        self.adapted_count += changed
+        return changed
+
+    def _labelled_masks(self, bgr: np.ndarray, uv: np.ndarray, caller: str):
+        """(marker mask, skin mask, markers used) around the labelled marker centres ``uv``, or
+        None when no marker stands out. The skin is the hand around the markers used (their
+        convex hull grown by two marker diameters), the markers themselves (grown) cut out."""
         self._check(bgr, None)
         try:
             uv = np.asarray(uv, dtype=float).reshape(-1, 2)
         except (TypeError, ValueError):
             raise InputError(
-                f"learn_markers: marker positions must be an (N, 2) array of pixels, got {uv!r}"
+                f"{caller}: marker positions must be an (N, 2) array of pixels, got {uv!r}"
             ) from None
         h, w = bgr.shape[:2]
         r = self.config.learn_radius_px
@@ -464,23 +499,21 @@ class MarkerDetector:
                 marker[y0:y1, x0:x1] |= seg
                 radii.append(math.sqrt(np.count_nonzero(seg) / math.pi))
                 used.append((cu, cv_))
-        self.learned_count = len(radii)
         if not radii:
-            return
-        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-        self.set_reference(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
-        self.reference_learned = True
-        # skin: the hand around the markers used, the markers themselves (grown) cut out
+            return None
         rad = float(np.median(radii))
-        hull = cv2.convexHull(np.array(used, np.int32))
         skin = np.zeros((h, w), np.uint8)
-        cv2.fillConvexPoly(skin, hull, 1)
+        if len(used) >= 3:
+            cv2.fillConvexPoly(skin, cv2.convexHull(np.array(used, np.int32)), 1)
+        else:
+            for c in used:
+                skin[c[1], c[0]] = 1
         skin = cv2.dilate(skin, cv2.getStructuringElement(
             cv2.MORPH_ELLIPSE, (int(4 * rad) | 1, int(4 * rad) | 1)))
         grown = cv2.dilate(marker, cv2.getStructuringElement(
             cv2.MORPH_ELLIPSE, (int(2 * rad) | 1, int(2 * rad) | 1)))
         skin[grown > 0] = 0
-        self.skin.learn(bgr, skin)
+        return marker, skin, len(radii)
 
 
 def _segment_marker(patch: np.ndarray, cu: int, cv_: int) -> np.ndarray | None:

@@ -8,7 +8,13 @@ their chroma to mean anything. The classifier is a lookup table over (Y, Cr, Cb)
 - at start, the fixed box of Chai & Ngan (1999): Cr in [133, 173], Cb in [77, 127];
 - once fitted (from the skin found in the first frames, or from the hand around the labelled
   markers in :meth:`SkinModel.learn`), the subject's own chroma: a Gaussian (mean, covariance in
-  CrCb) and a Mahalanobis-distance threshold.
+  CrCb) and a Mahalanobis-distance threshold. The Gaussian is illumination-invariant: in 8-bit
+  YCrCb a surface lit k times brighter has k times the luma and k times the chroma offset from
+  grey (128), so the samples are normalised to the model's luma before fitting and the model is
+  scaled to each luma bin of the table. A hand turned away from the light (pronation,
+  extension) keeps its skin; a fixed chroma Gaussian loses it and, with it, the markers on it.
+- :meth:`SkinModel.adapt` follows a slow change of the light's colour from skin known around
+  confidently labelled markers, with the mean held within a bounded distance of the first fit.
 
 The mask is dilated (closing the holes the markers punch in it and reaching markers on the hand's
 edge); its largest components give a bounding box with a margin (the region searched for markers)
@@ -25,9 +31,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-# LUT resolution: Y only gates, so 8 bins of 32 levels; chroma in bins of 4 levels (skin
-# clusters are tens of levels wide, so 4 loses nothing).
-Y_BINS = 8
+# LUT resolution: luma in bins of 8 levels (the fitted model is scaled with luma, so finer than
+# the gate alone would need); chroma in bins of 4 levels (skin clusters are tens of levels wide).
+Y_BINS = 32
+_Y_SUBSAMPLES = 4  # luma values per bin at which the scaled model is evaluated (then OR-ed)
+# Adaptation (SkinModel.adapt): weight of a new frame's fit, and how far (Mahalanobis, in the
+# first fit's covariance) the adapted mean may wander from the first fit before updates stop.
+ADAPT_RATE = 0.1
+ADAPT_MAX_DRIFT = 3.0
 C_BINS = 64
 _RANGES = [0, 256, 0, 256, 0, 256]
 _CHANNELS = [0, 1, 2]
@@ -53,14 +64,47 @@ def box_skin_lut(cr: tuple[float, float], cb: tuple[float, float], y_min: int) -
 
 
 def mahalanobis_skin_lut(
-    mean: np.ndarray, cov: np.ndarray, threshold: float, y_min: int
+    mean: np.ndarray,
+    cov: np.ndarray,
+    threshold: float,
+    y_min: int,
+    luma: float | None = None,
+    floor: float = 0.0,
 ) -> np.ndarray:
-    """(Y, Cr, Cb) lookup table, 255 where the (Cr, Cb) Mahalanobis distance <= threshold."""
+    """(Y, Cr, Cb) lookup table, 255 where the (Cr, Cb) Mahalanobis distance <= threshold.
+
+    Without ``luma`` the same Gaussian serves every luma. With ``luma`` (the mean luma Y0 of the
+    samples the Gaussian was fitted to) it is scaled to each luma Y: mean 128 + (mean - 128) Y/Y0
+    and covariance (cov - floor^2 I)(Y/Y0)^2 + floor^2 I (``floor``: the noise part, in levels,
+    that does not scale), evaluated at a few lumas across each bin.
+    """
     c = _bin_centres(C_BINS)
-    d = np.stack(np.meshgrid(c, c, indexing="ij"), -1) - np.asarray(mean)  # (C, C, 2)
-    d2 = np.einsum("...i,ij,...j->...", d, np.linalg.inv(cov), d)
-    lut = _y_gate(y_min)[:, None, None] & (d2 <= threshold * threshold)[None]
+    grid = np.stack(np.meshgrid(c, c, indexing="ij"), -1)  # (C, C, 2)
+    mean = np.asarray(mean, float)
+    gate = _y_gate(y_min)
+    if luma is None:
+        d = grid - mean
+        d2 = np.einsum("...i,ij,...j->...", d, np.linalg.inv(cov), d)
+        lut = gate[:, None, None] & (d2 <= threshold * threshold)[None]
+        return lut.astype(np.float32) * 255.0
+    width = 256 / Y_BINS
+    lut = np.zeros((Y_BINS, C_BINS, C_BINS), bool)
+    scalable = np.asarray(cov, float) - np.eye(2) * floor**2
+    for b in np.flatnonzero(gate):
+        for y in b * width + (np.arange(_Y_SUBSAMPLES) + 0.5) * width / _Y_SUBSAMPLES:
+            s = y / luma
+            d = grid - (128.0 + (mean - 128.0) * s)
+            inv = np.linalg.inv(scalable * s * s + np.eye(2) * floor**2)
+            lut[b] |= np.einsum("...i,ij,...j->...", d, inv, d) <= threshold * threshold
     return lut.astype(np.float32) * 255.0
+
+
+def normalised_chroma(ycc: np.ndarray, luma: float) -> np.ndarray:
+    """(N, 2) chroma of (N, 3) YCrCb samples as it would be at luma ``luma``: the offset from
+    grey scaled by luma / Y (the illumination-invariant chroma of :func:`mahalanobis_skin_lut`)."""
+    ycc = np.asarray(ycc, np.float64).reshape(-1, 3)
+    y = np.maximum(ycc[:, :1], 1.0)
+    return 128.0 + (ycc[:, 1:3] - 128.0) * (luma / y)
 
 
 def fit_chroma(crcb: np.ndarray, min_sigma: float, n_min: int) -> tuple[np.ndarray, np.ndarray]:
@@ -124,8 +168,11 @@ class SkinModel:
         self.lut = box_skin_lut(config.skin_cr, config.skin_cb, config.skin_y_min)
         self.mean: np.ndarray | None = None  # fitted CrCb Gaussian, None while on the fixed box
         self.cov: np.ndarray | None = None
+        self.luma: float | None = None  # the luma the Gaussian stands for (see module doc)
+        self.anchor: tuple[np.ndarray, np.ndarray] | None = None  # first fit: bounds adapt()
         self._frames_seen = 0
-        self._acc = np.zeros(6)  # n, sum cr, sum cb, sum cr^2, sum cr*cb, sum cb^2
+        # n, sum Y, then sums of rho = (Cr, Cb - 128) / Y: r, b, r^2, r*b, b^2
+        self._acc = np.zeros(7)
         s = max(int(config.skin_dilate_px / config.skin_downsample + 0.5), 1)
         self._kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * s + 1, 2 * s + 1))
 
@@ -133,12 +180,17 @@ class SkinModel:
     def adapted(self) -> bool:
         return self.mean is not None
 
-    def set_gaussian(self, mean: np.ndarray, cov: np.ndarray) -> None:
-        """Switch to the subject's chroma model (Mahalanobis threshold from the config)."""
+    def set_gaussian(self, mean: np.ndarray, cov: np.ndarray, luma: float | None = None) -> None:
+        """Switch to the subject's chroma model (Mahalanobis threshold from the config); with
+        ``luma`` (the samples' mean luma) the model is scaled with brightness (module doc)."""
         self.mean, self.cov = np.asarray(mean, float), np.asarray(cov, float)
+        self.luma = None if luma is None else float(luma)
+        if self.anchor is None:
+            self.anchor = (self.mean.copy(), self.cov.copy())
         self.lut = mahalanobis_skin_lut(
-            self.mean, self.cov, self.config.skin_mahalanobis, self.config.skin_y_min
-        )
+            self.mean, self.cov, self.config.skin_mahalanobis, self.config.skin_y_min,
+            self.luma, self.config.skin_min_sigma,
+        )  # fmt: skip
 
     @property
     def lut(self) -> np.ndarray:
@@ -197,29 +249,69 @@ class SkinModel:
         """Gather the chroma of the main skin component; fit once enough frames were seen."""
         # Erode so the samples are skin, not its blend with the background at the boundary.
         inner = cv2.erode(skin, None) > 0
-        crcb = ycc[inner & component][:, 1:3].astype(np.float64)
-        cr, cb = crcb[:, 0], crcb[:, 1]
-        self._acc += (len(cr), cr.sum(), cb.sum(), cr @ cr, cr @ cb, cb @ cb)
+        px = ycc[inner & component].astype(np.float64)
+        y = np.maximum(px[:, 0], 1.0)
+        r, b = (px[:, 1] - 128.0) / y, (px[:, 2] - 128.0) / y
+        self._acc += (len(y), y.sum(), r.sum(), b.sum(), r @ r, r @ b, b @ b)
         self._frames_seen += 1
         if self._frames_seen < self.config.skin_adapt_frames:
             return
-        n, scr, scb, scc, scrb, sbb = self._acc
+        n, sy, sr, sb, srr, srb, sbb = self._acc
         if n < self.config.skin_min_samples:
             return  # keep gathering
-        mean = np.array([scr, scb]) / n
-        cov = np.array([[scc, scrb], [scrb, sbb]]) / n - np.outer(mean, mean)
-        self.set_gaussian(mean, cov + np.eye(2) * self.config.skin_min_sigma**2)
+        luma = sy / n
+        rho = np.array([sr, sb]) / n
+        cov = (np.array([[srr, srb], [srb, sbb]]) / n - np.outer(rho, rho)) * luma**2
+        self.set_gaussian(128.0 + rho * luma, cov + np.eye(2) * self.config.skin_min_sigma**2,
+                          luma)
+
+    def _fit(self, bgr: np.ndarray, mask: np.ndarray, luma: float | None):
+        """(mean, cov, luma) of the skin where ``mask`` is set, normalised to ``luma`` (their
+        own mean luma if None); None when too few pixels are usable."""
+        ycc = cv2.cvtColor(bgr, cv2.COLOR_BGR2YCrCb)
+        sel = (mask > 0) & (ycc[..., 0] >= self.config.skin_y_min)
+        px = ycc[sel]
+        if len(px) < self.config.skin_min_samples:
+            return None
+        luma = float(px[:, 0].mean()) if luma is None else luma
+        try:
+            mean, cov = fit_chroma(normalised_chroma(px, luma), self.config.skin_min_sigma,
+                                   self.config.skin_min_samples)
+        except ValueError:
+            return None
+        return mean, cov, luma
 
     def learn(self, bgr: np.ndarray, mask: np.ndarray) -> bool:
         """Fit the subject's chroma from the pixels of ``bgr`` where ``mask`` is nonzero
-        (skin known from the labelled markers). False (model unchanged) if too few are usable."""
-        ycc = cv2.cvtColor(bgr, cv2.COLOR_BGR2YCrCb)
-        sel = (mask > 0) & (ycc[..., 0] >= self.config.skin_y_min)
-        try:
-            mean, cov = fit_chroma(
-                ycc[sel][:, 1:3], self.config.skin_min_sigma, self.config.skin_min_samples
-            )
-        except ValueError:
+        (skin known from the labelled markers). False (model unchanged) if too few are usable.
+        This fit becomes the anchor that bounds :meth:`adapt`."""
+        fit = self._fit(bgr, mask, None)
+        if fit is None:
             return False
-        self.set_gaussian(mean, cov)
+        self.anchor = None
+        self.set_gaussian(*fit)
+        return True
+
+    def adapt(self, bgr: np.ndarray, mask: np.ndarray, rate: float = ADAPT_RATE) -> bool:
+        """Blend the chroma of the skin where ``mask`` is set into the model (weight ``rate``).
+
+        For a slow change of the light's colour (white balance). Refused (False, model
+        unchanged) when too few pixels are usable or when the blended mean would move more than
+        ADAPT_MAX_DRIFT (Mahalanobis, first fit's covariance) from the first fit: a hand does
+        not change colour that much, a wrong mask (a sleeve, the table) would. Without a fit yet
+        this is :meth:`learn`.
+        """
+        if self.mean is None or self.anchor is None:
+            return self.learn(bgr, mask)
+        luma = self.luma if self.luma is not None else 128.0
+        fit = self._fit(bgr, mask, luma)
+        if fit is None:
+            return False
+        mean = (1.0 - rate) * self.mean + rate * fit[0]
+        cov = (1.0 - rate) * self.cov + rate * fit[1]
+        m0, c0 = self.anchor
+        d = mean - m0
+        if float(d @ np.linalg.solve(c0, d)) > ADAPT_MAX_DRIFT**2:
+            return False
+        self.set_gaussian(mean, cov, luma)
         return True
