@@ -248,18 +248,18 @@ def test_options_and_errors(tmp_path):
 def test_outline_culling_never_clips_geometry():
     """Only pixels inside each primitive's projected outline are ray-cast: with a much wider
     outline the z-buffer must not change (off-axis, tilted, moving poses)."""
-    from wristtrack.sim import render
+    from wristtrack.sim.renderer import Renderer
 
     scene = make_scene("hard", seed=0)
-    r = render._Renderer(scene, 0)
+    r = Renderer(scene, 0)
     for t in (1.0, 3.6, 5.0, 7.0):
         layer = r.layer(t)
-        region = x0, y0, x1, y1 = r._region([layer])
+        region = x0, y0, x1, y1 = r.region([layer])
         out = []
         for margin in (1.5, 12.0):
-            r._margin = margin
-            z, ids = r.bg_z[y0:y1, x0:x1].copy(), r.bg_id[y0:y1, x0:x1].copy()
-            r._draw(region, layer, r.bg_colour[y0:y1, x0:x1].copy(), z, ids)
+            r.caster.margin = margin
+            z, ids = r.bg.z[y0:y1, x0:x1].copy(), r.bg.ids[y0:y1, x0:x1].copy()
+            r.caster.draw(region, layer, r.bg.colour[y0:y1, x0:x1].copy(), z, ids)
             out.append((z, ids))
         np.testing.assert_array_equal(out[0][0], out[1][0])
         np.testing.assert_array_equal(out[0][1], out[1][1])

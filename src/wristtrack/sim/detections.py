@@ -8,6 +8,7 @@ import numpy as np
 
 from wristtrack import geometry
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import KINECT_DEPTH_COEFF, depth_sigma
 from wristtrack.detect.detections import Detections
 from wristtrack.hand import MARKER_NAMES, HandLayout
 from wristtrack.sim.motion import Trajectory
@@ -28,9 +29,10 @@ class SimFrame:
 class NoiseModel:
     """What goes wrong between the true marker centres and the detector output.
 
-    Depth noise is Kinect-like: sigma = depth_sigma_coeff * z^2 metres. A marker is hidden when
-    the back of the hand turns away: cosine between hand +Z and the marker-to-camera direction
-    below ``min_facing_cos``. ``occlusions``: (first frame, stop frame exclusive, marker indices).
+    Depth noise is Kinect-like (``depth_noise.depth_sigma``): sigma = depth_sigma_coeff * z^2
+    metres. A marker is hidden when the back of the hand turns away: cosine between hand +Z and
+    the marker-to-camera direction below ``min_facing_cos``. ``occlusions``: (first frame, stop
+    frame exclusive, marker indices).
     """
 
     pixel_sigma: float = 0.7
@@ -38,7 +40,7 @@ class NoiseModel:
     depth_range: tuple[float, float] = (0.3, 2.0)
     p_miss: float = 0.1
     depth: bool = True
-    depth_sigma_coeff: float = 1.425e-3
+    depth_sigma_coeff: float = KINECT_DEPTH_COEFF
     p_depth_hole: float = 0.0
     min_facing_cos: float = 0.15
     occlusions: tuple[tuple[int, int, tuple[int, ...]], ...] = ()
@@ -93,7 +95,7 @@ def simulate_detections(
     p_cam, uv_true, seen = visible_markers(traj, camera, layout, noise.min_facing_cos)
     uv = uv_true + rng.normal(0.0, noise.pixel_sigma, uv_true.shape)
     z_true = p_cam[..., 2]
-    z = z_true + rng.normal(0.0, 1.0, seen.shape) * noise.depth_sigma_coeff * z_true**2
+    z = z_true + rng.normal(0.0, 1.0, seen.shape) * depth_sigma(z_true, noise.depth_sigma_coeff)
     detected = seen & (rng.random(seen.shape) >= noise.p_miss) & camera.in_image(uv)
     for start, stop, markers in noise.occlusions:
         detected[max(start, 0) : stop, list(markers)] = False

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import depth_sigma
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.hand import HandLayout
 
@@ -229,7 +230,7 @@ def synth_scene(
         n_hand = R[:, 2]
         zmap = _plane_depth(cam, np.array([0.0, -0.45, -0.9]), np.array([0.0, 0.0, 0.85]))
         zmap = np.where(hand, _plane_depth(cam, n_hand, t), zmap)
-        zmap = zmap + rng.normal(0, 1, zmap.shape) * 1.425e-3 * zmap**2
+        zmap = zmap + rng.normal(0, 1, zmap.shape) * depth_sigma(zmap)
         raw = np.round(zmap / cam.depth_scale)
         raw[rng.random(raw.shape) < depth_dropout] = 0
         # Kinect-like holes: a shadow band along the hand's left edge, a few blobs on the table

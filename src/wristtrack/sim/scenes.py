@@ -17,6 +17,7 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError
 from wristtrack.hand import HandLayout
+from wristtrack.sim import realism
 from wristtrack.sim.motion import (
     Motion,
     Trajectory,
@@ -81,6 +82,7 @@ class Scene:
     exposure: float = 0.008
     gain_drift: float = 0.04
     noise: float = 1.0
+    effects: frozenset[str] = frozenset()  # realism effects switched on (sim.realism.EFFECTS)
 
     def trajectory(self) -> Trajectory:
         """Ground truth at the frame timestamps."""
@@ -89,6 +91,11 @@ class Scene:
     @property
     def duration(self) -> float:
         return float(self.times[-1] - self.times[0]) if len(self.times) > 1 else 0.0
+
+    @property
+    def fps(self) -> float:
+        """Nominal frame rate (the median frame interval's)."""
+        return 1.0 / float(np.median(np.diff(self.times))) if len(self.times) > 1 else 30.0
 
 
 def time_scaled(motion: Motion, factor: float) -> Motion:
@@ -130,7 +137,8 @@ _SPECS: dict[str, dict[str, Any]] = {
     },
 }
 
-_OPTIONS = ("fps", "duration", "n_frames", "camera", "layout", "exposure", "gain_drift", "noise")
+_OPTIONS = ("fps", "duration", "n_frames", "camera", "layout", "exposure", "gain_drift", "noise",
+            "effects", "hand_side")
 
 
 def make_scene(name: str, seed: int = 0, **options: Any) -> Scene:
@@ -141,7 +149,10 @@ def make_scene(name: str, seed: int = 0, **options: Any) -> Scene:
     - ``n_frames``: number of nominal frames; without ``duration`` the whole movement is
       squeezed into them, so a short test recording still contains all of it;
     - ``camera`` (Camera or camera.json path), ``layout`` (HandLayout or hand.json path);
-    - ``exposure`` (s), ``gain_drift``, ``noise``: override the scenario's settings.
+    - ``exposure`` (s), ``gain_drift``, ``noise``: override the scenario's settings;
+    - ``effects``: names of :data:`wristtrack.sim.realism.EFFECTS` to switch on (e.g.
+      ``realism.PRESET_REAL``); ``hand_side`` ("right" or "left"): "left" is the
+      ``left_hand`` effect.
 
     Irregular timing (jitter 3 ms, 5 % dropped frames) is drawn from ``seed``.
     """
@@ -206,7 +217,35 @@ def make_scene(name: str, seed: int = 0, **options: Any) -> Scene:
     layout = options.get("layout")
     if layout is not None:
         changes["layout"] = layout if isinstance(layout, HandLayout) else HandLayout.load(layout)
-    return replace(scene, **changes)
+    scene = replace(scene, **changes)
+    return with_effects(scene, options.get("effects", ()), options.get("hand_side", "right"),
+                        keep_exposure="exposure" in options)
+
+
+def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
+                 keep_exposure: bool = False) -> Scene:
+    """``scene`` with realism ``effects`` switched on: those that change the hand or the camera
+    (left hand, arched layout, lens distortion, long shutter) are applied to them here, the
+    others when rendering. ``keep_exposure``: an exposure chosen explicitly wins over the
+    ``shutter`` effect's."""
+    names = set(realism.check_effects(effects))
+    if hand_side not in ("right", "left"):
+        raise ConfigError(f"hand side must be 'right' or 'left', got {hand_side!r}")
+    if hand_side == "left":
+        names.add("left_hand")
+    if not names:
+        return scene
+    layout, camera, exposure = scene.layout, scene.camera, scene.exposure
+    if "left_hand" in names:
+        layout = realism.left(layout)
+    if "nonplanar" in names:
+        layout = realism.arched(layout)
+    if "distortion" in names:
+        camera = realism.distorted(camera)
+    if "shutter" in names and not keep_exposure:
+        exposure = realism.LONG_SHUTTER_S
+    return replace(scene, layout=layout, camera=camera, exposure=exposure,
+                   effects=frozenset(names))
 
 
 def custom_scene(name: str, motion: Motion, times: np.ndarray, **fields: Any) -> Scene:
