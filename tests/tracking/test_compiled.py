@@ -219,3 +219,23 @@ def test_importing_wristtrack_and_the_tracker_does_not_import_numba():
         "sys.exit('numba' in sys.modules)"
     )
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_the_tracker_calls_the_step_with_the_types_it_was_compiled_for(step):
+    track_scenario("mix", TrackerConfig(), seed=2)
+    assert len(step.signatures) == 1  # no second compile in the first frames of a real run
+
+
+def test_the_cache_key_changes_with_the_code_compiled_into_the_step():
+    def a(x):
+        return 2.0 * x
+
+    def b(x):
+        return 3.0 * x
+
+    def a_again(x):
+        return 2.0 * x
+
+    digest = compiled._code_digest
+    assert digest([a]) == digest([a_again]) != digest([b])
+    assert digest([a, b]) != digest([b, a])
