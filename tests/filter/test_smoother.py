@@ -6,7 +6,6 @@ from __future__ import annotations
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,8 +22,6 @@ from wristtrack.sim.render import render_recording
 from wristtrack.sim.scenario_run import score_run, track_scenario
 from wristtrack.tracking.models import MODELS
 from wristtrack.tracking.tracker import Status, TrackerConfig
-
-CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"
 
 
 class _LinearModel(ukf.EuclideanModel):
@@ -124,7 +121,7 @@ def recording(tmp_path_factory):
     return out
 
 
-def test_track_smooth_end_to_end(recording, tmp_path):
+def test_track_smooth_end_to_end(recording, tmp_path, check_run):
     plain, smooth = tmp_path / "plain", tmp_path / "smooth"
     assert main(["track", str(recording), "--out", str(plain), "--no-progress"]) == 0
     assert main(["track", str(recording), "--out", str(smooth), "--smooth", "--no-progress"]) == 0
@@ -143,8 +140,7 @@ def test_track_smooth_end_to_end(recording, tmp_path):
     assert summary["settings"]["smoothed"] is True
     flex = summary["range_of_motion"]["flexion"]
     assert flex["max_deg"] == pytest.approx(np.nanmax(rows["flexion_deg"]), abs=1e-6)
-    if CHECK_RUN.exists():
-        check = subprocess.run(
-            [sys.executable, str(CHECK_RUN), str(smooth)], capture_output=True, text=True
-        )
-        assert check.returncode == 0, check.stdout + check.stderr
+    check = subprocess.run(
+        [sys.executable, str(check_run), str(smooth)], capture_output=True, text=True
+    )
+    assert check.returncode == 0, check.stdout + check.stderr

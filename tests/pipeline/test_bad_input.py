@@ -24,23 +24,20 @@ from wristtrack.cli import main
 from wristtrack.io.folder import PROBE_FRAMES, RecordingWriter
 from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.sim.render import render_recording
 
-CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"
 N = 60
 BAD = 20  # the frame spoilt inside the recording
 
 
 @pytest.fixture(scope="module")
-def rendered(tmp_path_factory):
-    return render_recording(tmp_path_factory.mktemp("rendered") / "rec", "deviation", seed=5,
-                            n_frames=N)
+def deviation(rendered):
+    return rendered("deviation", seed=5, n_frames=N)
 
 
 @pytest.fixture
-def rec(rendered, tmp_path):
+def rec(deviation, tmp_path):
     """A fresh copy of the rendered recording to spoil."""
-    return Path(shutil.copytree(rendered, tmp_path / "rec"))
+    return Path(shutil.copytree(deviation, tmp_path / "rec"))
 
 
 def track(capsys, *argv: str) -> tuple[int, list[str]]:
@@ -183,7 +180,8 @@ def test_output_folder_that_is_a_file(rec, capsys, tmp_path):
 # ------------------------------------------------------------------- problems in one frame
 
 
-def test_a_corrupt_frame_inside_the_recording_is_reported_marked_and_skipped(rec, tmp_path):
+def test_a_corrupt_frame_inside_the_recording_is_reported_marked_and_skipped(rec, tmp_path,
+                                                                           check_run):
     png = rec / "rgb" / f"{BAD:06d}.png"
     png.write_bytes(png.read_bytes()[: png.stat().st_size // 3])  # truncated
     out = tmp_path / "out"
@@ -203,10 +201,9 @@ def test_a_corrupt_frame_inside_the_recording_is_reported_marked_and_skipped(rec
     summary = json.loads((out / "summary.json").read_text())
     (skipped,) = summary["skipped_frames"]
     assert skipped["frame"] == BAD and "corrupt or truncated" in skipped["error"]
-    if CHECK_RUN.exists():
-        check = subprocess.run([sys.executable, str(CHECK_RUN), str(out)], capture_output=True,
-                               text=True, check=False)
-        assert check.returncode == 0, check.stdout
+    check = subprocess.run([sys.executable, str(check_run), str(out)], capture_output=True,
+                           text=True, check=False)
+    assert check.returncode == 0, check.stdout
 
 
 def test_wrong_depth_in_one_frame_and_time_going_backwards_are_skipped(rec, capsys, tmp_path):

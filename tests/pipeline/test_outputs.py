@@ -3,19 +3,17 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from wristtrack.analysis.evaluate import evaluate
-from wristtrack.analysis.summary import SummaryAccumulator, write_json_atomic
+from wristtrack.analysis.summary import SummaryAccumulator
 from wristtrack.errors import InputError
+from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.poses import COLUMNS, PosesWriter, read_poses, rows_to_poses, write_truth
 from wristtrack.sim.scenario_run import track_scenario
-
-CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"
 
 
 @pytest.fixture(scope="module")
@@ -33,11 +31,10 @@ def run_dir(tmp_path_factory):
     return out, run
 
 
-@pytest.mark.skipif(not CHECK_RUN.exists(), reason="shared/tools/check_run.py not beside the repo")
-def test_outputs_pass_the_contract_checker(run_dir):
+def test_outputs_pass_the_contract_checker(run_dir, check_run):
     out, _ = run_dir
     proc = subprocess.run(
-        [sys.executable, str(CHECK_RUN), str(out)], capture_output=True, text=True, check=False
+        [sys.executable, str(check_run), str(out)], capture_output=True, text=True, check=False
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "contracts kept" in proc.stdout

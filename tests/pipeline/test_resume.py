@@ -9,7 +9,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -20,16 +19,13 @@ from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
 from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
 from wristtrack.pipeline.track import TEST_SLEEP_ENV, track_recording
-from wristtrack.sim.render import render_recording
 
-CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"
 N_FRAMES = 48
 
 
 @pytest.fixture(scope="module")
-def rec(tmp_path_factory):
-    return render_recording(tmp_path_factory.mktemp("rec") / "reach", "reach", seed=0,
-                            n_frames=N_FRAMES)
+def rec(rendered):
+    return rendered("reach", seed=0, n_frames=N_FRAMES)
 
 
 @pytest.fixture(scope="module")
@@ -117,9 +113,9 @@ def _wait_for_rows(proc, path, rows, timeout=180.0):
     raise AssertionError("no rows appeared")
 
 
-def _check_poses(path):
+def _check_poses(check_run, path):
     """The contract checker's poses.csv checks (shared/tools/check_run.py)."""
-    spec = importlib.util.spec_from_file_location("check_run", CHECK_RUN)
+    spec = importlib.util.spec_from_file_location("check_run", check_run)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.check_poses(path)
@@ -133,9 +129,9 @@ def _cli_resume(rec, out):
     )
 
 
-@pytest.mark.skipif(not CHECK_RUN.exists(), reason="shared/tools/check_run.py not beside the repo")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
-def test_killed_cli_run_keeps_a_valid_poses_csv_and_resumes(rec, reference, tmp_path, sig):
+def test_killed_cli_run_keeps_a_valid_poses_csv_and_resumes(rec, reference, tmp_path, sig,
+                                                             check_run):
     out = tmp_path / "run"
     proc = _start(rec, out)
     _wait_for_rows(proc, out / "poses.csv", 12)
@@ -146,12 +142,12 @@ def test_killed_cli_run_keeps_a_valid_poses_csv_and_resumes(rec, reference, tmp_
     # every row there is whole and is the uninterrupted run's row
     assert kept == _data_lines(reference / "poses.csv")[: len(kept)]
     assert len(read_poses(out / "poses.csv")["frame"]) == len(kept)
-    assert _check_poses(out / "poses.csv") == []
+    assert _check_poses(check_run, out / "poses.csv") == []
     if sig == signal.SIGINT:
         assert proc.returncode == 130
         assert len(err.strip().splitlines()) == 1 and "--resume" in err
         assert _summary(out)["interrupted"] is True
-        checked = subprocess.run([sys.executable, str(CHECK_RUN), str(out)],
+        checked = subprocess.run([sys.executable, str(check_run), str(out)],
                                  capture_output=True, text=True, check=False)
         assert checked.returncode == 0, checked.stdout
     else:

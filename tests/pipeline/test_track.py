@@ -3,7 +3,6 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -13,8 +12,6 @@ from wristtrack.cli import main
 from wristtrack.hand import HandLayout
 from wristtrack.io.poses import read_poses
 from wristtrack.sim.render import render_recording
-
-CHECK_RUN = Path(__file__).resolve().parents[3] / "shared" / "tools" / "check_run.py"
 
 
 @pytest.fixture(scope="module")
@@ -37,12 +34,11 @@ def _evaluate(out, recording, capsys):
     return json.loads((out / "evaluation.json").read_text())
 
 
-@pytest.mark.skipif(not CHECK_RUN.exists(), reason="shared/tools/check_run.py not beside the repo")
-def test_track_and_evaluate_a_rendered_recording(recordings, tmp_path, capsys):
+def test_track_and_evaluate_a_rendered_recording(recordings, tmp_path, capsys, check_run):
     rec = recordings["flexion"]
     summary = _track(rec, tmp_path / "run")
     proc = subprocess.run(
-        [sys.executable, str(CHECK_RUN), str(tmp_path / "run")],
+        [sys.executable, str(check_run), str(tmp_path / "run")],
         capture_output=True, text=True, check=False,
     )
     assert proc.returncode == 0, proc.stdout

@@ -15,12 +15,13 @@ import cv2
 import numpy as np
 import pytest
 
-from wristtrack.analysis.summary import SummaryAccumulator, write_json_atomic
+from wristtrack.analysis.summary import SummaryAccumulator
 from wristtrack.camera import Camera
 from wristtrack.cli import main
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InputError
 from wristtrack.geometry import matrix_from_quat
+from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.open import open_recording
 from wristtrack.io.poses import PosesWriter, read_poses
 from wristtrack.pipeline.track import track_recording
@@ -34,8 +35,8 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory):
-    return render_recording(tmp_path_factory.mktemp("rec") / "reach", "reach", seed=0, n_frames=40)
+def recording(rendered):
+    return rendered("reach", seed=0, n_frames=40)
 
 
 @pytest.fixture(scope="module")
@@ -192,17 +193,9 @@ def test_every_image_is_an_embedded_png_and_matches_the_figures_folder(run):
         assert (out / "figures" / f"{name}.png").read_bytes() == data
 
 
-def _chromium() -> str:
-    for candidate in ("/usr/bin/chromium", shutil.which("chromium")):
-        if candidate and Path(candidate).exists():
-            return candidate
-    pytest.fail("Chromium is needed to check that report.html renders: install it with "
-                "`apt-get install chromium` (Debian/Ubuntu); CI does so in .ci/run")
-
-
-def test_chromium_loads_every_figure(run, tmp_path):
+def test_chromium_loads_every_figure(run, tmp_path, chromium):
     out, report = run
-    cmd = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
            "--no-first-run", "--disable-background-networking", "--disable-component-update",
            "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom",
            report.resolve().as_uri()]

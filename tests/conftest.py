@@ -1,0 +1,54 @@
+"""Fixtures shared by the whole suite: recordings rendered once per session, the contract
+checker and the browser used by the page tests."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+CHROMIUM_INSTALL = "apt-get install chromium (Debian/Ubuntu; .ci/run does it in CI)"
+
+
+@pytest.fixture(scope="session")
+def rendered(tmp_path_factory) -> Callable[..., Path]:
+    """``rendered(scenario, seed=0, **render_options)``: the folder of that simulated recording,
+    rendered once per session and shared by every test asking for the same arguments.
+
+    Read-only: a test that changes a recording copies it first (``shutil.copytree``).
+    """
+    from wristtrack.sim.render import render_recording
+
+    root = tmp_path_factory.mktemp("rendered")
+    cache: dict[tuple, Path] = {}
+
+    def get(scenario: str, seed: int = 0, **options) -> Path:
+        key = (scenario, seed, tuple(sorted((k, repr(v)) for k, v in options.items())))
+        if key not in cache:
+            folder = root / f"{len(cache):02d}-{scenario}-{seed}"
+            cache[key] = Path(render_recording(folder, scenario, seed=seed, **options))
+        return cache[key]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def check_run() -> Path:
+    """../shared/tools/check_run.py, the contract checker for a run folder."""
+    path = SHARED / "tools" / "check_run.py"
+    if not path.is_file():
+        pytest.skip(f"the contract checker {path} is not beside the repository (../shared)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """A headless-capable Chromium, or a skip that says how to install one."""
+    for candidate in (shutil.which("chromium"), shutil.which("chromium-browser"),
+                      "/usr/bin/chromium"):
+        if candidate and Path(candidate).exists():
+            return candidate
+    pytest.skip(f"no Chromium for the browser check: install it with `{CHROMIUM_INSTALL}`")
