@@ -1,0 +1,89 @@
+"""``--record DIR``: the raw frames of a live session written as a recording folder.
+
+PNG encoding of a colour and a depth image costs several milliseconds, which the tracking
+loop cannot spare at 30 fps, so frames are handed to a writer thread through a bounded queue
+(OpenCV releases the GIL while it encodes). Every captured frame is recorded, including the
+ones the tracker dropped; only if the disk cannot keep up for ``max_pending`` frames is a frame
+left out of the recording, and that is counted (``lost``), never silent.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.errors import WristtrackError
+from wristtrack.hand import HandLayout
+from wristtrack.io.folder import RecordingWriter
+
+MAX_PENDING = 90  # frames (3 s at 30 fps, ~140 MB at 640x480 RGB-D) waiting for the disk
+
+_END = object()
+
+
+class LiveRecorder:
+    """Writes frames to a recording folder from a background thread; use as a context manager.
+
+    The folder must be new or empty (RecordingWriter refuses to overwrite a recording).
+    ``error`` holds the one-line reason if writing failed (the session goes on untracked by the
+    recorder, and the caller reports it).
+    """
+
+    def __init__(
+        self,
+        folder: str | Path,
+        camera: Camera,
+        hand: HandLayout | None = None,
+        max_pending: int = MAX_PENDING,
+    ) -> None:
+        self.writer = RecordingWriter(folder, camera, hand)  # refuses a non-empty folder now
+        self.folder = self.writer.folder
+        self.lost = 0
+        self.error: str | None = None
+        self._queue: queue.Queue = queue.Queue(maxsize=max_pending)
+        self._thread = threading.Thread(target=self._run, name="wristtrack-record", daemon=True)
+        self._thread.start()
+
+    @property
+    def written(self) -> int:
+        return self.writer.count
+
+    def put(self, timestamp: float, bgr: np.ndarray, depth: np.ndarray | None) -> None:
+        """Queue one frame; never blocks (a full queue loses the frame and counts it)."""
+        if self.error is not None:
+            self.lost += 1
+            return
+        try:
+            self._queue.put_nowait((timestamp, bgr, depth))
+        except queue.Full:
+            self.lost += 1
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is _END:
+                return
+            if self.error is not None:
+                continue  # drain: the caller learns of the failure from ``error``
+            try:
+                self.writer.write(*item)
+            except (WristtrackError, OSError) as exc:
+                self.error = str(exc)
+                self.lost += 1
+
+    def close(self) -> None:
+        """Write what is queued, then close the folder."""
+        if self._thread.is_alive():
+            self._queue.put(_END)
+            self._thread.join()
+        self.writer.close()
+
+    def __enter__(self) -> LiveRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,199 @@
+"""``realsense[:SERIAL]`` and RealSense SDK recordings, through Intel's ``pyrealsense2``.
+
+Depth is aligned to the colour image by the SDK (``rs.align``), so frames are registered as
+the recording-folder contract asks; the colour intrinsics, distortion and the depth scale are
+read from the device (or from the recording), not assumed. The SDK's own recordings are read
+through the same pipeline, as the SDK plays them back: ``.bag`` (RealSense Viewer up to SDK
+2.56, ROS 1 layout) and ``.db3`` (SDK 2.57 on, ROS 2 layout). ``pip install
+'wristtrack[realsense]'``; a missing library, no device or an unknown serial is one line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.errors import ConfigError, InputError
+from wristtrack.hand import HandLayout
+from wristtrack.io.base import Frame, Recording, reject_options
+
+INSTALL = "pip install 'wristtrack[realsense]'"
+RECORDING_SUFFIXES = (".bag", ".db3")
+FRAME_TIMEOUT_S = 5.0  # no frameset for this long: the device stalled (or was unplugged)
+
+
+def import_pyrealsense2():
+    """The ``pyrealsense2`` module, or one ConfigError line saying what to install."""
+    try:
+        import pyrealsense2 as rs
+    except ImportError as exc:
+        missing = getattr(exc, "name", None)
+        if missing in ("pyrealsense2", None) and "cannot open shared object" not in str(exc):
+            raise ConfigError(
+                f"RealSense cameras need Intel's pyrealsense2: {INSTALL}"
+            ) from None
+        # The wheel is there but a system library it links to is not (libusb on a slim image).
+        raise ConfigError(
+            f"pyrealsense2 is installed but cannot load ({exc}); install the system library it "
+            "names (Debian/Ubuntu: apt-get install libusb-1.0-0)"
+        ) from None
+    return rs
+
+
+def camera_from_intrinsics(intr: Any, depth_scale: float, rs: Any) -> Camera:
+    """Camera from the SDK's colour-stream intrinsics (OpenCV-compatible distortion only)."""
+    coeffs = [float(c) for c in intr.coeffs]
+    dist = None
+    if any(coeffs):
+        if intr.model != rs.distortion.brown_conrady:
+            raise ConfigError(
+                f"the RealSense colour stream reports {intr.model} distortion "
+                f"{coeffs}, which OpenCV's model does not express; calibrate the colour "
+                "camera with OpenCV and pass --camera camera.json"
+            )
+        dist = tuple(coeffs)  # SDK order k1, k2, p1, p2, k3 = OpenCV's
+    return Camera(fx=float(intr.fx), fy=float(intr.fy), cx=float(intr.ppx), cy=float(intr.ppy),
+                  width=int(intr.width), height=int(intr.height),
+                  depth_scale=float(depth_scale), dist=dist)
+
+
+class RealSenseRecording(Recording):
+    """A RealSense device (``serial`` or the first one found) or an SDK recording (``file``).
+
+    A device streams ``width`` x ``height`` colour (BGR8) and depth (Z16) at ``fps``;
+    timestamps are the SDK's frame timestamps in seconds from the first frame. A recording
+    plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
+    ``camera`` overrides the intrinsics read from the device.
+    """
+
+    kind = "RealSense camera"
+
+    def __init__(
+        self,
+        serial: str | None = None,
+        camera: Camera | None = None,
+        hand: HandLayout | None = None,
+        *,
+        file: str | Path | None = None,
+        width: int = 640,
+        height: int = 480,
+        fps: int = 30,
+        real_time: bool = True,
+        max_frames: int | None = None,
+        **unknown: object,
+    ) -> None:
+        name = f"realsense:{file or serial or ''}".rstrip(":")
+        reject_options("the RealSense source", name, unknown)
+        rs = import_pyrealsense2()
+        self._rs = rs
+        config = rs.config()
+        if file is not None:
+            file = Path(file)
+            if not file.is_file():
+                raise InputError(f"RealSense recording {file} not found; give a .bag or .db3 "
+                                 "file written by the RealSense SDK or Viewer")
+            if file.suffix.lower() not in RECORDING_SUFFIXES:
+                raise InputError(f"{file}: a RealSense recording is a .bag or .db3 file")
+            config.enable_device_from_file(str(file), repeat_playback=False)
+        else:
+            serials = [d.get_info(rs.camera_info.serial_number)
+                       for d in rs.context().query_devices()]
+            if not serials:
+                raise InputError("no RealSense camera found; plug it into a USB 3 port (and check "
+                                 "the udev rules), or give a recording: realsense:FILE.bag")
+            if serial and serial not in serials:
+                raise InputError(f"no RealSense camera with serial {serial}; connected: "
+                                 f"{', '.join(serials)}")
+            if serial:
+                config.enable_device(serial)
+            config.enable_stream(rs.stream.depth, width, height, rs.format.z16, fps)
+            config.enable_stream(rs.stream.color, width, height, rs.format.bgr8, fps)
+        self._pipe = rs.pipeline()
+        try:
+            profile = self._pipe.start(config)
+        except RuntimeError as exc:  # busy device, unsupported mode, unreadable file
+            raise InputError(f"{name} cannot be started: {exc}") from None
+        try:
+            device = profile.get_device()
+            if file is not None:
+                device.as_playback().set_real_time(bool(real_time))
+            streams = {s.stream_type(): s for s in profile.get_streams()}
+            if rs.stream.color not in streams:
+                raise InputError(f"{name} has no colour stream; the tracker needs colour")
+            self.has_depth = rs.stream.depth in streams
+            intr = streams[rs.stream.color].as_video_stream_profile().get_intrinsics()
+            scale = device.first_depth_sensor().get_depth_scale() if self.has_depth else 0.001
+            self.device_name = device.get_info(rs.camera_info.name)
+            if camera is None:
+                camera = camera_from_intrinsics(intr, scale, rs)
+        except Exception:
+            self._pipe.stop()
+            raise
+        super().__init__(name, camera, hand)
+        self.file = file
+        self.max_frames = max_frames
+        self._align = rs.align(rs.stream.color) if self.has_depth else None
+        self._running = True
+
+    def __len__(self) -> int:
+        raise TypeError(f"{self.source}: a RealSense stream has no length")
+
+    def _frames(self, start: int = 0) -> Iterator[Frame]:
+        if start:
+            raise InputError(f"{self.source}: a RealSense stream cannot start at frame {start}")
+        index, t0 = 0, None
+        last_number = None
+        while self._running and (self.max_frames is None or index < self.max_frames):
+            ok, frames = self._pipe.try_wait_for_frames(int(FRAME_TIMEOUT_S * 1000))
+            if not ok:
+                if self.file is not None and index > 0:
+                    return  # a recording ends by going quiet
+                raise InputError(f"{self.source} delivered no frame for {FRAME_TIMEOUT_S:g} s; "
+                                 "check the cable (USB 3) and that no other program uses it")
+            if self._align is not None:
+                frames = self._align.process(frames)
+            color = frames.get_color_frame()
+            depth = frames.get_depth_frame() if self._align is not None else None
+            if not color:
+                continue  # a depth-only frameset (streams start at different moments)
+            number = color.get_frame_number()
+            if number == last_number:
+                continue  # a playback may hand the same colour frame to two framesets
+            last_number = number
+            t = color.get_timestamp() / 1000.0  # ms -> s
+            t0 = t if t0 is None else t0
+            # The SDK recycles its buffers: copy (or convert) before the next wait.
+            bgr = self._to_bgr(color)
+            raw = np.array(np.asanyarray(depth.get_data()), np.uint16, copy=True) if depth else None
+            where = f"{self.source} frame {index}"
+            self.check_size(bgr, where)
+            yield Frame(index, t - t0, bgr, raw)
+            index += 1
+
+    def _to_bgr(self, color: Any) -> np.ndarray:
+        """BGR8 copy of a colour frame (the Viewer records RGB8; devices may stream YUYV)."""
+        rs, fmt = self._rs, color.get_profile().format()
+        data = np.asanyarray(color.get_data())
+        if fmt == rs.format.bgr8:
+            return np.array(data, np.uint8, copy=True)
+        if fmt == rs.format.rgb8:
+            return cv2.cvtColor(data, cv2.COLOR_RGB2BGR)
+        if fmt == rs.format.yuyv:
+            return cv2.cvtColor(data.reshape(color.get_height(), -1, 2), cv2.COLOR_YUV2BGR_YUYV)
+        raise InputError(f"{self.source}: colour format {fmt} is not supported; record or "
+                         "stream colour as RGB8, BGR8 or YUYV")
+
+    def close(self) -> None:
+        super().close()
+        if self._running:
+            self._running = False
+            try:
+                self._pipe.stop()
+            except RuntimeError:
+                pass  # already stopped (a recording that ended)
+
