@@ -191,11 +191,38 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from wristtrack.sim.realism import EFFECTS, PRESET_REAL
     from wristtrack.sim.render import render_recording
 
-    out = render_recording(args.out, args.scenario, seed=args.seed, overwrite=args.overwrite)
-    print(f"wrote simulated recording {out} (ground truth in {out}/truth.csv)")
+    effects = set(PRESET_REAL if args.preset == "real" else ())
+    effects |= {e for e in EFFECTS if getattr(args, e, False)}
+    options = {"effects": sorted(effects), "hand_side": args.hand_side}
+    if args.n_frames is not None:
+        options["n_frames"] = args.n_frames
+    out = render_recording(args.out, args.scenario, seed=args.seed, overwrite=args.overwrite,
+                           **options)
+    side = "" if args.hand_side == "right" else f", {args.hand_side} hand"
+    print(f"wrote simulated recording {out} (ground truth in {out}/truth.csv; effects: "
+          f"{', '.join(sorted(effects)) or 'none'}{side})")
     return 0
+
+
+# One switch per simulator effect (wristtrack.sim.realism.EFFECTS; left_hand is --hand-side).
+_SIM_EFFECT_HELP = {
+    "nonplanar": "arched palm: knuckles up to 7 mm above, thumb base 4.5 mm below the wrist "
+    "marker's plane (3-D hand.json)",
+    "soft_tissue": "fingers flex 0-70 deg; the MCP markers slide with the skin (3 mm at 90 deg)",
+    "distortion": "a real Xtion's lens distortion (k1 0.033, k2 -0.108), in camera.json",
+    "white_balance": "auto white balance drifting +-10 %% in red and blue",
+    "auto_exposure": "auto-exposure steps of up to +-30 %% every 1.5-4 s",
+    "jpeg": "colour JPEG-compressed at quality 80",
+    "h264": "colour H.264-compressed (libx264, CRF 23; needs the video extra: PyAV)",
+    "bayer": "Bayer mosaic and bilinear demosaicing",
+    "shutter": "1/30 s shutter (motion blur)",
+    "specular": "glossy domed markers with the lamp's highlight",
+    "structured_light": "Kinect v1/Xtion depth: Nguyen noise, 1/8 px disparity steps, edge "
+    "holes, invalid border, 1-2 px colour-depth misregistration",
+}
 
 
 def _positive_int(text: str) -> int:
@@ -334,6 +361,16 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--scenario", default="deviation")
     simulate.add_argument("--seed", type=int, default=0)
     simulate.add_argument("--overwrite", action="store_true")
+    simulate.add_argument("--n-frames", type=_positive_int, metavar="N",
+                          help="render N frames (the scenario's movement squeezed into them)")
+    simulate.add_argument("--preset", choices=("real",),
+                          help="'real': every camera and hand effect at a real device's strength "
+                          "(JPEG, not H.264)")
+    simulate.add_argument("--hand-side", choices=("right", "left"), default="right",
+                          help="left: the mirrored hand (CMC1 on -Y) and its hand.json")
+    for name, text in _SIM_EFFECT_HELP.items():
+        simulate.add_argument(f"--{name.replace('_', '-')}", dest=name, action="store_true",
+                              help=text)
     simulate.set_defaults(handler=_simulate)
     return parser
 
