@@ -44,7 +44,7 @@ def online(factory: Callable[[Camera, HandLayout], object]) -> Runner:
 
 def _smoothed(camera: Camera, layout: HandLayout, detections: list[Detections]):
     """The default tracker, then the offline unscented RTS smoother over its results."""
-    from wristtrack.filter.smoother import smooth_results
+    from wristtrack.tracking.smoothed_results import smooth_results
 
     tracker = Tracker(camera, layout, TrackerConfig())
     results = [tracker.step(d) for d in detections]

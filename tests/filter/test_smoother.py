@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,14 +13,12 @@ from filterpy.kalman import KalmanFilter
 from wristtrack.analysis.evaluate import evaluate
 from wristtrack.cli import main
 from wristtrack.filter import ukf
-from wristtrack.filter.smoother import rts_smooth, smooth_results, track_segments
+from wristtrack.filter.smoother import rts_smooth
 from wristtrack.io.poses import read_poses
 from wristtrack.io.states import STATES_FILE, StateWriter, read_states, truncate_states
-from wristtrack.sim.motion import SCENARIOS
 from wristtrack.sim.render import render_recording
-from wristtrack.sim.scenario_run import score_run, track_scenario
-from wristtrack.tracking.models import MODELS
-from wristtrack.tracking.tracker import Status, TrackerConfig
+from wristtrack.sim.scenario_run import track_scenario
+from wristtrack.tracking.tracker import TrackerConfig
 
 
 class _LinearModel(ukf.EuclideanModel):
@@ -53,45 +50,6 @@ def test_linear_model_matches_filterpy_rts_smoother():
 
     np.testing.assert_allclose(xs, expected_x, atol=1e-10)
     np.testing.assert_allclose(Ps, expected_P, atol=1e-10)
-
-
-@pytest.mark.parametrize("name", SCENARIOS)
-def test_smoothing_reduces_error_on_every_scenario(name):
-    config = TrackerConfig()
-    run = track_scenario(name, config, seed=2)
-    smoothed = smooth_results(MODELS[config.model](config.process), run.results, config.ukf)
-    after = score_run(name, run.truth, run.frames, smoothed).errors
-    assert after.orientation_rmse_deg < 0.85 * run.errors.orientation_rmse_deg
-    assert after.position_rmse_mm < 0.85 * run.errors.position_rmse_mm
-    # the last frame has no future: smoothed = filtered there
-    last = run.results[-1]
-    np.testing.assert_allclose(smoothed[-1].R, last.R, atol=1e-12)
-    # the smoothed covariance is never larger than the filtered one
-    for r, s in zip(run.results[::20], smoothed[::20], strict=True):
-        if r.has_estimate:
-            assert np.trace(s.cov) <= np.trace(r.cov) + 1e-12
-            assert np.all(np.linalg.eigvalsh(s.cov) > 0)
-
-
-def test_each_track_is_smoothed_on_its_own():
-    config = TrackerConfig()
-    run = track_scenario("reach", config, seed=0)
-    results = list(run.results)
-    # break the run in two: a gap of frames without estimate, then a track of its own
-    gap = range(60, 64)
-    for i in gap:
-        results[i] = replace(results[i], status=Status.LOST, x=None, cov=None)
-    for i in range(64, len(results)):
-        results[i] = replace(results[i], track_id=1)
-    segments = track_segments(results)
-    first = next(i for i, r in enumerate(results) if r.has_estimate)
-    assert [(s[0], s[-1]) for s in segments] == [(first, 59), (64, len(results) - 1)]
-    smoothed = smooth_results(MODELS["default"](config.process), results, config.ukf)
-    for i in gap:
-        assert smoothed[i] is results[i]
-    # the end of the first track has no future inside its track: unchanged by the smoother
-    np.testing.assert_allclose(smoothed[59].p, results[59].p, atol=1e-12)
-    assert not np.allclose(smoothed[30].p, results[30].p, atol=1e-9)
 
 
 def test_state_log_round_trip_and_truncation(tmp_path):

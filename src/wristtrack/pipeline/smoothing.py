@@ -10,6 +10,7 @@ keep their row unchanged, and what the filter saw (markers, clutter, NIS) is kep
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import shutil
@@ -18,10 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from wristtrack.errors import InputError
-from wristtrack.filter.smoother import smooth_results
 from wristtrack.filter.ukf import UKFParams
-from wristtrack.io.poses import COLUMNS, pose_row
+from wristtrack.io.atomic import write_text_atomic
+from wristtrack.io.poses import COLUMNS, pose_row, read_pose_table
 from wristtrack.io.states import STATES_FILE, read_states
+from wristtrack.tracking.smoothed_results import smooth_results
 from wristtrack.tracking.tracker import FrameResult, Status
 
 FILTERED_POSES = "poses_filtered.csv"
@@ -44,11 +46,8 @@ def smooth_run(
     has an estimate) for the summary. Removes the state file once poses.csv is rewritten."""
     out = Path(out)
     poses_path, states_path = out / "poses.csv", out / STATES_FILE
-    with open(poses_path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    header, body = rows[0], rows[1:]
-    if body and len(body[-1]) != len(header):  # a last line cut short by an interruption
-        body = body[:-1]
+    header, rows = read_pose_table(poses_path)
+    body = list(rows)  # a last line cut short by an interruption is already dropped
     states = read_states(states_path)
     if len(states.frame) != len(body):
         raise InputError(
@@ -76,11 +75,10 @@ def smooth_run(
                 s.side,
             ) + row[len(COLUMNS):]
         out_rows.append(row)
-    tmp = out / "poses.csv.smoothing"
-    with open(tmp, "w", newline="") as fh:
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(header)
-        writer.writerows(out_rows)
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(out_rows)
     # keep the filtered rows under their new name first (a second link to the same file), then
     # swap the smoothed ones in: at no moment is there no poses.csv
     filtered = out / FILTERED_POSES
@@ -89,7 +87,7 @@ def smooth_run(
         os.link(poses_path, filtered)
     except OSError:  # a file system without hard links
         shutil.copyfile(poses_path, filtered)
-    os.replace(tmp, poses_path)
+    write_text_atomic(poses_path, text.getvalue())
     states_path.unlink()
     return summary_results
 

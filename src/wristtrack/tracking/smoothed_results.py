@@ -1,0 +1,81 @@
+"""The tracker's results smoothed: the unscented RTS smoother (filter/smoother.py) run over each
+track of a finished run, with the poses, velocities and uncertainties rebuilt from the smoothed
+states. Each track (from one initialisation to the loss of the hand) is smoothed on its own;
+frames without an estimate stay without one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from wristtrack.filter.smoother import rts_smooth
+from wristtrack.filter.ukf import ManifoldModel, UKFParams
+from wristtrack.geometry import so3_log
+from wristtrack.tracking.results import FrameResult
+
+_DEFAULT_PARAMS = UKFParams()
+
+
+def track_segments(results: list[FrameResult]) -> list[np.ndarray]:
+    """Frame indices of each run of estimates from one initialisation (one track), in order."""
+    segments: list[list[int]] = []
+    last_id = None
+    for i, r in enumerate(results):
+        if not r.has_estimate or r.x is None or r.cov is None:
+            last_id = None
+            continue
+        if r.track_id != last_id:
+            segments.append([])
+            last_id = r.track_id
+        segments[-1].append(i)
+    return [np.asarray(s) for s in segments]
+
+
+def smooth_results(
+    model: ManifoldModel, results: list[FrameResult], params: UKFParams = _DEFAULT_PARAMS
+) -> list[FrameResult]:
+    """The run's results with every estimate replaced by its smoothed value.
+
+    Poses, velocities, covariances and uncertainties are smoothed; everything the filter saw
+    (labels, markers, clutter, NIS) is kept. W0 is recovered from the filtered results
+    (R_ch = R_c0 R, t_ch = R_c0 p + t_c0), so the results are all that is needed.
+    """
+    out = list(results)
+    for seg in track_segments(results):
+        first = results[seg[0]]
+        R_c0 = first.R_ch @ first.R.T
+        t_c0 = first.t_ch - R_c0 @ first.p
+        xs = np.stack([results[i].x for i in seg])
+        Ps = np.stack([results[i].cov for i in seg])
+        times = np.array([results[i].timestamp for i in seg])
+        xs_s, Ps_s = rts_smooth(model, xs, Ps, times, params)
+        R_all, p_all = model.pose(xs_s)
+        R_prev = None
+        for j, i in enumerate(seg):
+            R, p = R_all[j], p_all[j]
+            v, w = model.velocities(xs_s[j])
+            if not np.isfinite(w).all():  # a state without rates (the paper's): differentiate R
+                w = (
+                    so3_log(R @ R_prev.T) / (times[j] - times[j - 1])
+                    if R_prev is not None
+                    else np.zeros(3)
+                )
+            R_prev = R
+            var = Ps_s[j].diagonal()
+            out[i] = replace(
+                results[i],
+                R_ch=R_c0 @ R,
+                t_ch=R_c0 @ p + t_c0,
+                R=R.copy(),
+                p=p.copy(),
+                v=np.array(v, dtype=float),
+                w=np.array(w, dtype=float),
+                cov=Ps_s[j],
+                x=xs_s[j],
+                pos_sigma_mm=1e3 * math.sqrt(max(var[model.position].sum(), 0.0)),
+                rot_sigma_deg=math.degrees(math.sqrt(max(var[model.rotation].sum(), 0.0))),
+            )
+    return out
