@@ -177,7 +177,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from wristtrack.analysis.evaluate import evaluate, format_report
-    from wristtrack.analysis.summary import write_json_atomic
+    from wristtrack.io.atomic import write_json_atomic
 
     run = Path(args.run_dir)
     truth = Path(args.truth) if args.truth else None

@@ -1,4 +1,4 @@
-"""Reading and writing the small JSON configuration files (camera.json, hand.json)."""
+"""Reading and writing the small JSON configuration files (camera.json, hand.json, labels)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from wristtrack.errors import ConfigError
+from wristtrack.io.atomic import write_json_atomic
 
 
 def read_config(path: str | Path, kind: str) -> Any:
@@ -28,7 +29,7 @@ def read_config(path: str | Path, kind: str) -> Any:
 
 
 def write_config(path: str | Path, data: Any) -> None:
-    """Write indented JSON, creating the parent folder if needed."""
+    """Write indented JSON (atomically), creating the parent folder if needed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    write_json_atomic(path, data)

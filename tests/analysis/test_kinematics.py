@@ -331,30 +331,6 @@ def test_metrics_of_a_tracked_reach_agree_with_its_truth(tmp_path):
     np.testing.assert_array_equal(raw[known], v[known])
 
 
-def test_streamed_columns_equal_read_poses(tmp_path):
-    tr, _, _ = scenario("mix", rng=2)
-    path = tmp_path / "truth.csv"
-    write_truth(path, tr)
-    lines = path.read_text().splitlines(keepends=True)
-    lines[5] = lines[5].replace("truth", "lost")  # an ordinary row
-    cut = lines + [lines[7][:25]]  # a last row cut short by an interrupted run (no newline)
-    path.write_text("".join(cut))
-    want, got = read_poses(path), kin.read_kinematic_columns(path)
-    assert len(got["timestamp"]) == len(tr)
-    for name, column in got.items():
-        np.testing.assert_array_equal(column, want[name])
-    # A whole row without its newline was cut just before it: dropped as well.
-    path.write_text("".join(lines)[:-1])
-    assert len(kin.read_kinematic_columns(path)["timestamp"]) == len(tr) - 1
-    # A short row followed by others is damage, not an interruption.
-    path.write_text("".join(lines[:4] + [lines[4][:30] + "\n"] + lines[5:]))
-    with pytest.raises(InputError, match="line 5"):
-        kin.read_kinematic_columns(path)
-    path.write_text("".join(lines[:3] + [lines[3].replace(",", ",x", 1)] + lines[4:]))
-    with pytest.raises(InputError, match="non-number"):
-        kin.read_kinematic_columns(path)
-
-
 # ----------------------------------------------------------------- simulated end to end
 
 

@@ -54,10 +54,7 @@ Smoothness, per reach, on the speed resampled to a uniform grid at the run's med
 
 from __future__ import annotations
 
-import csv
 import math
-import os
-from array import array
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -65,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.errors import ConfigError, InputError
+from wristtrack.io.poses import read_poses
 
 AXES = ("deviation", "flexion", "pronation")
 _ANGLE_COLUMNS = ("deviation_deg", "flexion_deg", "pronation_deg")
@@ -610,72 +608,13 @@ _NEEDED = (
 )
 
 
-def read_kinematic_columns(path: str | Path) -> dict[str, np.ndarray]:
-    """The numeric columns :func:`analyse` needs from a poses.csv, as read_poses gives them.
-
-    Streamed into 8 bytes per kept cell: read_poses holds every cell of the file as text
-    (about 60 MB more peak memory per 20 000 rows), which would break the pipeline's flat
-    memory on long recordings. Same rules: header checked, a last line cut short (too few
-    cells, or no newline) dropped, a short line elsewhere an error.
-    """
-    from wristtrack.io.poses import CONTRACT_COLUMNS
-
-    path = Path(path)
-    try:
-        fh = open(path, newline="")  # noqa: SIM115 (closed below; open errors reported apart)
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
-    with fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None or header[: len(CONTRACT_COLUMNS)] != list(CONTRACT_COLUMNS):
-            raise InputError(f"{path} is not a poses.csv: its header lacks the contract's columns")
-        index = [header.index(name) for name in _NEEDED]
-        data = [array("d") for _ in _NEEDED]
-        short: tuple[int, int] | None = None  # (line, cells) of a short row: fine only if last
-        line = 1
-        for row in reader:
-            line += 1
-            if short is not None:
-                break
-            if len(row) != len(header):
-                short = (line, len(row))
-                continue
-            try:
-                values = [float(row[j]) if row[j] else math.nan for j in index]
-            except ValueError:
-                name = next(n for n, j in zip(_NEEDED, index, strict=True) if not _number(row[j]))
-                raise InputError(f"{path}: column {name} holds a non-number") from None
-            for column, value in zip(data, values, strict=True):
-                column.append(value)
-        if short is not None and line > short[0]:
-            raise InputError(f"{path} line {short[0]}: {short[1]} cells, header has {len(header)}")
-    if short is None and len(data[0]) and not _ends_with_newline(path):
-        for column in data:
-            column.pop()  # the writer ends every whole row with a newline
-    return {name: np.frombuffer(column, dtype=float).copy() for name, column in zip(
-        _NEEDED, data, strict=True)}
-
-
-def _number(cell: str) -> bool:
-    try:
-        float(cell or "nan")
-    except ValueError:
-        return False
-    return True
-
-
-def _ends_with_newline(path: Path) -> bool:
-    with open(path, "rb") as fh:
-        fh.seek(-1, os.SEEK_END)
-        return fh.read(1) == b"\n"
-
-
 def analyse_file(
     poses_csv: str | Path, settings: KinematicsSettings | None = None
 ) -> dict[str, Any]:
     """:func:`analyse` of a poses.csv (or truth.csv) read back from disk."""
-    columns = read_kinematic_columns(poses_csv)
+    # Only the columns analyse() needs: a long run's poses.csv read whole would break the
+    # pipeline's flat memory.
+    columns = read_poses(poses_csv, columns=_NEEDED)
     try:
         return analyse(columns, settings)
     except InputError as exc:
@@ -708,7 +647,6 @@ __all__ = [
     "path_length",
     "range_of_motion",
     "reach_metrics",
-    "read_kinematic_columns",
     "segment_reaches",
     "sparc",
     "speed_series",

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import math
-import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -118,10 +115,3 @@ def camera_pose_dict(R_c0: np.ndarray | None, t_c0: np.ndarray | None) -> dict[s
         return None
     return {"t_m": [float(x) for x in t_c0], "q_wxyz": [float(x) for x in quat_from_matrix(R_c0)]}
 
-
-def write_json_atomic(path: str | Path, data: dict[str, Any]) -> None:
-    """Write JSON to a temporary file beside ``path``, then rename: never a half-written file."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
-    os.replace(tmp, path)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import csv
 import math
+from array import array
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
@@ -116,39 +118,91 @@ def write_truth(path: str | Path, trajectory, side: str = "right") -> None:
             )
 
 
-def read_poses(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a poses.csv / truth.csv as arrays (numbers as float, status as str).
+def read_pose_table(path: str | Path) -> tuple[list[str], Iterator[list[str]]]:
+    """The header of a poses.csv / truth.csv and an iterator over its body rows as text cells.
 
-    A last line cut short by an interrupted run is dropped, not an error: one without its
-    newline (every row is written whole with its newline, so a cut one lacks it) or with too
-    few cells.
+    The header is checked now (InputError if the file cannot be read or is not a poses.csv);
+    rows are streamed, so a long run is never held as text. A last line cut short by an
+    interrupted run is dropped, not an error: one without its newline (every row is written
+    whole with its newline, so a cut one lacks it) or with too few cells. A row of the wrong
+    length anywhere else is an InputError naming its line.
     """
     path = Path(path)
     try:
-        with open(path, newline="") as fh:
-            text = fh.read()
+        fh = open(path, newline="")  # noqa: SIM115 (the row iterator closes it)
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
-    rows = list(csv.reader(text.splitlines()))
-    if not rows or rows[0][: len(CONTRACT_COLUMNS)] != list(CONTRACT_COLUMNS):
+    ended = [True]  # whether the line read last ended with its newline
+    reader = csv.reader(_lines(fh, ended))
+    try:
+        header = next(reader, None)
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        fh.close()
+        raise InputError(f"cannot read {path}: {exc}") from None
+    if header is None or header[: len(CONTRACT_COLUMNS)] != list(CONTRACT_COLUMNS):
+        fh.close()
         raise InputError(f"{path} is not a poses.csv: its header lacks the contract's columns")
-    header, body = rows[0], rows[1:]
-    if body and (len(body[-1]) != len(header) or not text.endswith("\n")):
-        body = body[:-1]
-    bad = next((i for i, r in enumerate(body) if len(r) != len(header)), None)
-    if bad is not None:
-        raise InputError(f"{path} line {bad + 2}: {len(body[bad])} cells, header has {len(header)}")
-    out: dict[str, np.ndarray] = {}
-    for j, name in enumerate(header):
-        cells = [r[j] for r in body]
-        if name == "status":
-            out[name] = np.array(cells, dtype=str)
-            continue
+    return header, _body(path, fh, reader, len(header), ended)
+
+
+def _lines(fh: TextIO, ended: list[bool]) -> Iterator[str]:
+    for line in fh:
+        ended[0] = line.endswith(("\n", "\r"))
+        yield line
+
+
+def _body(
+    path: Path, fh: TextIO, reader: Iterator[list[str]], width: int, ended: list[bool]
+) -> Iterator[list[str]]:
+    """Rows one behind the reader: whether a row is the cut-short last one is known only when
+    the next one comes (or the file ends)."""
+    with fh:
+        held: list[str] | None = None
+        line = 1
         try:
-            out[name] = np.array([float(c) if c else np.nan for c in cells], dtype=float)
-        except ValueError:
-            raise InputError(f"{path}: column {name} holds a non-number") from None
-    return out
+            for row in reader:
+                if held is not None:
+                    if len(held) != width:
+                        raise InputError(
+                            f"{path} line {line}: {len(held)} cells, header has {width}"
+                        )
+                    yield held
+                held = row
+                line += 1
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"cannot read {path}: {exc}") from None
+        if held is not None and len(held) == width and ended[0]:
+            yield held
+
+
+def read_poses(path: str | Path, columns: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Columns of a poses.csv / truth.csv as arrays (numbers as float, status as str): all of
+    them, or only ``columns`` (8 bytes a row per numeric column kept: a long run read for a few
+    columns stays small). Rows as :func:`read_pose_table` gives them."""
+    path = Path(path)
+    header, rows = read_pose_table(path)
+    names = list(header if columns is None else columns)
+    missing = [name for name in names if name not in header]
+    if missing:
+        raise InputError(f"{path} has no column {', '.join(missing)}; is it a poses.csv?")
+    index = [header.index(name) for name in names]
+    numbers = {name: array("d") for name in names if name != "status"}
+    status: list[str] = []
+    for row in rows:
+        for name, j in zip(names, index, strict=True):
+            if name == "status":
+                status.append(row[j])
+                continue
+            cell = row[j]
+            try:
+                numbers[name].append(float(cell) if cell else math.nan)
+            except ValueError:
+                raise InputError(f"{path}: column {name} holds a non-number") from None
+    out = {name: np.frombuffer(col, dtype=float).copy() if len(col) else np.empty(0)
+           for name, col in numbers.items()}
+    if "status" in names:
+        out["status"] = np.array(status, dtype=str)
+    return {name: out[name] for name in names}
 
 
 def rows_to_poses(columns: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from wristtrack.analysis.evaluate import evaluate, format_report
-from wristtrack.analysis.summary import write_json_atomic
+from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.open import open_recording
 from wristtrack.pipeline.smoothing import FILTERED_POSES
 from wristtrack.pipeline.track import track_recording

@@ -18,9 +18,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wristtrack.analysis.kinematics import analyse_file
-from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict, write_json_atomic
+from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
+from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Recording
 from wristtrack.io.poses import PosesWriter, pose_row
 from wristtrack.io.states import STATES_FILE, StateWriter

@@ -12,7 +12,6 @@ import base64
 import datetime as dt
 import html
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ import numpy as np
 from wristtrack import __version__
 from wristtrack.analysis.kinematics import KinematicsSettings, analyse, lowpass, velocity_profile
 from wristtrack.geometry import matrix_from_quat
+from wristtrack.io.atomic import write_bytes_atomic
 from wristtrack.io.run_folder import read_run
 from wristtrack.report import figures as rf
 
@@ -305,12 +305,6 @@ def render_html(
     )
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def write_report(run_dir: str | Path) -> Path:
     """Write ``run_dir``/report.html and ``run_dir``/figures/*.png from the run's poses.csv and
     summary.json; returns the report's path."""
@@ -322,7 +316,7 @@ def write_report(run_dir: str | Path) -> Path:
     folder = run / "figures"
     folder.mkdir(exist_ok=True)
     for name, data in pngs.items():
-        _write_atomic(folder / f"{name}.png", data)
+        write_bytes_atomic(folder / f"{name}.png", data)
     out = run / "report.html"
-    _write_atomic(out, render_html(summary, columns, kin, pngs, run).encode("utf-8"))
+    write_bytes_atomic(out, render_html(summary, columns, kin, pngs, run).encode("utf-8"))
     return out

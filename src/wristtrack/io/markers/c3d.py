@@ -11,12 +11,12 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from wristtrack.errors import ConfigError, InputError
+from wristtrack.io.atomic import atomic_path
 from wristtrack.io.markers.data import MarkerData, unit_scale, zeros_as_gaps
 from wristtrack.io.markers.trajectories import MarkerTrajectories
 
@@ -49,11 +49,10 @@ def write_c3d(path: str | Path, traj: MarkerTrajectories, units: str = "mm") -> 
     point["UNITS"]["value"] = [units]
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"] = {"residuals": residuals}
-    tmp = path.with_name(path.stem + ".tmp.c3d")  # ezc3d appends .c3d to other names
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        c3d.write(str(tmp))
-        os.replace(tmp, path)
+        with atomic_path(path, suffix=".tmp.c3d") as tmp:  # ezc3d appends .c3d to other names
+            c3d.write(str(tmp))
     except (OSError, RuntimeError) as exc:
         raise InputError(f"cannot write {path}: {exc}") from None
 

@@ -10,12 +10,12 @@ header lines and one row per frame.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from wristtrack.errors import InputError
+from wristtrack.io.atomic import write_text_atomic
 from wristtrack.io.markers.data import MarkerData, unit_scale, zeros_as_gaps
 from wristtrack.io.markers.trajectories import MarkerTrajectories
 
@@ -52,11 +52,9 @@ def write_trc(path: str | Path, traj: MarkerTrajectories, units: str = "mm") -> 
     """Write ``traj`` as an OpenSim TRC file (via a temporary file: never a half-written one)."""
     path = Path(path)
     text = trc_text(traj, units, path.name)
-    tmp = path.with_name(path.name + ".tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(text, encoding="utf-8", newline="\n")
-        os.replace(tmp, path)
+        write_text_atomic(path, text)
     except OSError as exc:
         raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
 
