@@ -33,6 +33,7 @@ import numpy as np
 from wristtrack import __version__
 from wristtrack.errors import InputError, WristtrackError
 from wristtrack.io.atomic import write_bytes_atomic
+from wristtrack.tracking.tracker import Tracker
 
 CHECKPOINT_FILE = ".checkpoint.pkl"
 CHECKPOINT_FRAMES = 300  # default: a checkpoint at least every this many frames ...
@@ -168,11 +169,12 @@ class _Pickler(pickle.Pickler):
         # come back as a 2-D image with 32 channels).
         if type(obj) is cv2.Mat:
             return _mat, (np.asarray(obj).copy(), obj.wrap_channels)
-        # The tracker's fast step holds preallocated buffers and views into them; a pickle would
-        # cut the views loose. It holds no state between frames, so it is left out and rebuilt.
-        if getattr(obj, "_fast", None) is not None and type(obj).__name__ == "Tracker":
+        # The tracker's compiled step (numba) does not come back from a pickle working: its
+        # helpers are compiled under their names only in the process that loaded it. It holds
+        # no state between frames, so it is left out and the restored tracker loads it again.
+        if type(obj) is Tracker and obj._compiled is not None:
             light = copy.copy(obj)
-            light._fast = None
+            light._compiled = light._compiled_usable = None
             self._keep.append(light)
             return light.__reduce_ex__(pickle.HIGHEST_PROTOCOL)
         return NotImplemented
