@@ -196,6 +196,7 @@ def compare(
             "translation": reg.t_lc.tolist(),
             "quaternion_wxyz": quat_from_matrix(reg.R_lc).tolist(),
             "frame": "reference lab <- camera: x_lab = rotation x_cam + translation (metres)",
+            "hand_centre_cam_m": reg.hand_centre_cam.tolist(),
             "sigma": reg.sigma,
             "iterations": reg.iterations,
         },

@@ -10,10 +10,11 @@ our hand frame in the cluster's frame (X_R, x_t). Model per frame i (our time t_
 
 solved by scipy.optimize.least_squares from a closed-form start (rotation averaging, the
 AX = XB rotation-axis fit for the cluster offset, linear least squares for the translations),
-in two passes: the second drops gross outliers (beyond 5x the median error) and weights position
-and orientation residuals by their own scatter. Uncertainties: the Gauss-Newton covariance
-(J^T J)^-1 s^2 at the optimum, inflated for the residuals' serial correlation (tracking errors
-are correlated from frame to frame, so there are fewer independent frames than rows).
+in two passes: the second drops gross outliers (beyond 5x the median error) and weights each
+position (camera axes) and orientation (hand axes) residual component by its own scatter.
+Uncertainties: the Gauss-Newton covariance (J^T J)^-1 s^2 at the optimum, inflated for the
+residuals' serial correlation (tracking errors are correlated from frame to frame, so there are
+fewer independent frames than rows).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from scipy.optimize import least_squares
 
 from wristtrack.analysis.compare_reference import Interpolator
 from wristtrack.errors import InputError
-from wristtrack.geometry import project_to_so3, so3_exp, so3_log
+from wristtrack.geometry import project_to_so3, skew, so3_exp, so3_log
 
 OUTLIER_FACTOR = 5.0
 _MARGIN_S = 0.05  # frames kept need the reference this far around them: the offset may move
@@ -42,6 +43,7 @@ class Registration:
     sigma: dict[str, float]  # 1-sigma: offset_s, ratio, rotation_deg, translation_mm, ...
     used: np.ndarray  # (M,) bool, frames of the input the final fit used
     iterations: int
+    hand_centre_cam: np.ndarray  # (3,) m, mean wrist position (camera) over the used frames
 
     def to_lab(self, R_ch: np.ndarray, t_ch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Our hand pose (cam) in the reference's lab frame."""
@@ -103,7 +105,7 @@ class _Problem:
         self.cluster, self.fit_ratio = cluster, fit_ratio
         self.tm = float(np.mean(t))
         self.R0, self.X0 = start[0], start[2]
-        self.sp, self.sr = 1.0, 1.0  # residual scales: mm, deg
+        self.sp, self.sr = np.ones(3), np.ones(3)  # residual scales per axis: mm, deg
         self.rows = np.ones(len(t), bool)
 
     def unpack(self, x):
@@ -120,10 +122,12 @@ class _Problem:
         return R_lc, t_lc, offset, ratio, X_R, x_t
 
     def errors(self, x) -> tuple[np.ndarray, np.ndarray]:
-        """Per-frame position error (M,3) mm and orientation error (M,3) deg of all frames."""
+        """Per-frame position error (M,3) mm in camera axes and orientation error (M,3) deg in
+        hand axes, of all frames. Camera axes because a camera's depth error is several times
+        its lateral error: each axis gets its own weight."""
         R_lc, t_lc, offset, ratio, X_R, x_t = self.unpack(x)
         R_ref, p_ref = self.interp(offset + ratio * self.t)
-        pos = (self.t_ch @ R_lc.T + t_lc) - (p_ref + R_ref @ x_t)
+        pos = ((self.t_ch @ R_lc.T + t_lc) - (p_ref + R_ref @ x_t)) @ R_lc
         if not self.interp.has_rotation:
             return pos * 1e3, np.zeros_like(pos)
         E = np.swapaxes(R_ref @ X_R, -1, -2) @ (R_lc @ self.R_ch)
@@ -190,15 +194,16 @@ def register(
         if rows.sum() < 10:
             raise InputError("the registration fits fewer than 10 frames; check the mapping")
         prob.rows = rows
-        prob.sp = max(float(np.sqrt(np.mean(pos[rows] ** 2))), 1e-3)
-        prob.sr = max(float(np.sqrt(np.mean(rot[rows] ** 2))), 1e-3)
+        prob.sp = np.maximum(np.sqrt(np.mean(pos[rows] ** 2, axis=0)), 1e-3)
+        prob.sr = np.maximum(np.sqrt(np.mean(rot[rows] ** 2, axis=0)), 1e-3)
     sol = least_squares(prob.residuals, x0, method="trf", x_scale="jac")
     iterations += int(sol.nfev)
     R_lc, t_lc, offset, ratio, X_R, x_t = prob.unpack(sol.x)
     sigma = _uncertainty(prob, sol, fit_ratio, cluster)
     used = np.zeros(len(use), bool)
     used[np.flatnonzero(use)[prob.rows]] = True
-    return Registration(R_lc, t_lc, offset, ratio, X_R, x_t, sigma, used, iterations)
+    return Registration(R_lc, t_lc, offset, ratio, X_R, x_t, sigma, used, iterations,
+                        t_ch[prob.rows].mean(axis=0))
 
 
 def _uncertainty(prob: _Problem, sol, fit_ratio: bool, cluster: bool) -> dict[str, float]:
@@ -221,14 +226,23 @@ def _uncertainty(prob: _Problem, sol, fit_ratio: bool, cluster: bool) -> dict[st
         sd_ratio = float(sd[7])
     else:
         sd_offset, sd_ratio = float(sd[6]), 0.0
+    # A rotation error moves the lab image of a far point a lot (0.1 deg = 1.1 mm at 0.65 m):
+    # what matters is the error where the hand was, at the centre of the tracked positions.
+    R_lc = so3_exp(sol.x[:3]) @ prob.R0
+    c = R_lc @ prob.t_ch[prob.rows].mean(axis=0)
+    G = np.zeros((3, n))
+    G[:, :3] = -skew(c)
+    G[:, 3:6] = np.eye(3)
     out = {
         "offset_s": sd_offset,
+        "translation_at_hand_mm": float(np.sqrt(max(np.trace(G @ cov @ G.T), 0.0)) * inflate
+                                        * 1e3),
         "ratio": sd_ratio,
         "rotation_deg": float(np.degrees(np.linalg.norm(sd[:3]))),
         "translation_mm": float(np.linalg.norm(sd[3:6]) * 1e3),
         "serial_correlation_inflation": inflate,
-        "residual_position_mm": prob.sp,
-        "residual_orientation_deg": prob.sr,
+        "residual_position_mm": float(np.linalg.norm(prob.sp)),
+        "residual_orientation_deg": float(np.linalg.norm(prob.sr)),
     }
     if cluster:
         i = 8 if fit_ratio else 7
