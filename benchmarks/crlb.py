@@ -7,7 +7,7 @@ perturbation, and Sigma the measurement noise. The perturbation is the one the b
 R = exp(dphi) R_ch (rotation about the wrist, in camera axes; its norm is the geodesic angle)
 and t = t_ch + dt (wrist position in the camera frame). The Jacobian is taken by central
 differences of ``Camera.project``, so it is independent of the analytic Jacobians in
-``initialise.refine_pose`` and the filters, and covers lens distortion.
+``pose_fit.refine_pose`` and the filters, and covers lens distortion.
 
 The depth sigma c z^2 depends on the pose; the extra Fisher information from that dependence,
 (1/2) tr(Sigma^-1 dSigma Sigma^-1 dSigma) ~ 8/z^2 per marker, is below 1e-5 of the mean term at

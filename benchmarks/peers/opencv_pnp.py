@@ -2,7 +2,7 @@
 
 Each frame on its own: the blobs (the same detections the tracker gets) are labelled by the best
 fit of the hand layout (3-D alignment to the back-projected blobs where there is depth, else
-``initialise.label_markers``), then the pose is ``cv2.solvePnP`` with the planar IPPE solver on
+``labelling.label_markers``), then the pose is ``cv2.solvePnP`` with the planar IPPE solver on
 the labelled pixels (it keeps the lower-error of IPPE's two solutions), polished by
 ``cv2.solvePnPRefineLM``. Pixels only in the pose, as PnP is: depth serves the labelling alone.
 A frame where no labelling or no pose is found has no estimate.
@@ -19,7 +19,8 @@ from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError
 from wristtrack.hand import HandLayout
-from wristtrack.tracking.initialise import initialise, label_markers
+from wristtrack.tracking.initialise import initialise
+from wristtrack.tracking.labelling import label_markers
 from wristtrack.tracking.tracker import FrameResult, Status
 
 _NAN3 = np.full(3, np.nan)
@@ -63,7 +64,7 @@ class OpenCVPnPTracker:
         blobs whose side lengths match a triple of markers within ``TRIPLE_TOL``; each
         alignment labels the blobs within ``GATE`` of its predicted markers; the alignment with
         the most markers, then the least squared residual, wins. Without depth:
-        ``initialise.label_markers`` (all six markers needed).
+        ``labelling.label_markers`` (all six markers needed).
         """
         n = self.points.shape[0]
         depth = det.depth

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from benchmarks.crlb import pose_crlb
 from wristtrack.camera import Camera
 from wristtrack.hand import HandLayout
-from wristtrack.tracking.initialise import refine_pose
+from wristtrack.tracking.pose_fit import refine_pose
 
 CAM = Camera(fx=525.0, fy=500.0, cx=319.5, cy=239.5, width=640, height=480, depth_scale=0.001)
 FACING = np.diag([1.0, -1.0, -1.0])  # hand +Z towards the camera, hand X along camera x

@@ -1,5 +1,5 @@
-"""Tests of wristtrack.tracking.initialise against independent oracles (cv2.solvePnP,
-cv2.projectPoints, scipy Rotation, known ground truth)."""
+"""Tests of the initialisation (tracking/initialise, labelling, pose_fit) against independent
+oracles (cv2.solvePnP, cv2.projectPoints, scipy Rotation, known ground truth)."""
 
 from __future__ import annotations
 
@@ -11,16 +11,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import KINECT_DEPTH_COEFF
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError
 from wristtrack.hand import HandLayout
-from wristtrack.tracking.initialise import (
-    KINECT_DEPTH_COEFF,
-    initial_guess,
-    initialise,
-    label_markers,
-    refine_pose,
-)
+from wristtrack.tracking.initialise import initialise
+from wristtrack.tracking.labelling import label_markers
+from wristtrack.tracking.pose_fit import initial_guess, refine_pose
 
 CAM = Camera.default()
 LAYOUT = HandLayout.default()
