@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import KINECT_DEPTH_COEFF, depth_sigma
 from wristtrack.geometry import so3_exp
 
 _STEP = 1e-6  # rad / m: central-difference truncation ~1e-12, rounding ~1e-10 relative
@@ -86,7 +87,7 @@ def pose_crlb(
     visible: np.ndarray | None = None,
     has_depth: np.ndarray | bool = True,
     pixel_sigma: float = 0.7,
-    depth_coeff: float = 1.425e-3,
+    depth_coeff: float = KINECT_DEPTH_COEFF,
     depth_floor: float = 0.0,
 ) -> PoseBound:
     """Cramér-Rao bound of the pose at true poses R_ch (N,3,3), t_ch (N,3).
@@ -94,7 +95,7 @@ def pose_crlb(
     ``points`` (n,3) are the marker centres in the hand frame; ``visible`` (N,n) which markers
     are measured in each frame (all if None); ``has_depth`` (N,n) or a bool, which of those
     carry a depth. Pixel noise is isotropic ``pixel_sigma``; depth noise sigma is
-    max(depth_coeff z^2, depth_floor) at the true depth z (the simulator's
+    ``depth_noise.depth_sigma`` at the true depth z (the simulator's
     ``NoiseModel.depth_sigma_coeff``; it applies no floor).
     """
     R_ch = np.asarray(R_ch, dtype=float).reshape(-1, 3, 3)
@@ -106,7 +107,7 @@ def pose_crlb(
     dep = np.broadcast_to(np.asarray(has_depth, bool), (N, n)) & vis
     J = measurement_jacobian(camera, points, R_ch, t_ch)
     z = _measure(camera, np.asarray(points, float), R_ch, t_ch)[..., 2]
-    sz = np.maximum(depth_coeff * z**2, depth_floor)
+    sz = depth_sigma(z, depth_coeff, depth_floor)
     if (dep & ~(sz > 0)).any():
         raise ValueError("depth measured with zero noise: give depth_coeff or depth_floor > 0")
     w = np.zeros((N, n, 3))  # inverse variances; zero where not measured

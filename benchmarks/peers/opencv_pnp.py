@@ -24,7 +24,6 @@ from wristtrack.tracking.labelling import label_markers
 from wristtrack.tracking.tracker import FrameResult, Status
 
 _NAN3 = np.full(3, np.nan)
-_NAN33 = np.full((3, 3), np.nan)
 MIN_MARKERS = 4  # IPPE needs four coplanar points
 TRIPLE_TOL = 0.01  # m: side lengths of a blob triple vs a marker triple (depth noise ~1 mm)
 _LM_STOP = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-12)  # OpenCV's: 20, 1e-7
@@ -134,19 +133,16 @@ class OpenCVPnPTracker:
         except InitialisationError:
             pose = None
         if pose is None:
-            return FrameResult(
-                self._frame, det.timestamp, Status.LOST, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3,
-                _NAN3, None, np.full(det.count, -1), 0, det.count,
-            )
+            return FrameResult.empty(self._frame, det.timestamp, Status.LOST, det.count)
         R_ch, t_ch, _ = pose
         if self.R_c0 is None:
             self.R_c0, self.t_c0 = R_ch, t_ch
         n_vis = int(np.sum(labels >= 0))
         return FrameResult(
-            self._frame, det.timestamp, Status.TRACKING, R_ch, t_ch, self.R_c0.T @ R_ch,
-            self.R_c0.T @ (t_ch - self.t_c0), _NAN3, _NAN3, None, labels, n_vis,
-            det.count - n_vis,
-        )
+            frame=self._frame, timestamp=det.timestamp, status=Status.TRACKING, R_ch=R_ch,
+            t_ch=t_ch, R=self.R_c0.T @ R_ch, p=self.R_c0.T @ (t_ch - self.t_c0), v=_NAN3,
+            w=_NAN3, cov=None, labels=labels, n_visible=n_vis, n_clutter=det.count - n_vis,
+        )  # no velocities: a per-frame pose solver has no motion model
 
 
 def _ordered_triples(m: int) -> np.ndarray:

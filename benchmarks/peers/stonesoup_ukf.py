@@ -51,8 +51,6 @@ from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
 from wristtrack.tracking.tracker import FrameResult, Status, TrackerConfig
 
 _EPOCH = datetime(2000, 1, 1)
-_NAN3 = np.full(3, np.nan)
-_NAN33 = np.full((3, 3), np.nan)
 
 
 def _rotvec_pose(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -220,10 +218,7 @@ class StoneSoupTracker:
         try:
             init = initialise(det, self.camera, self.layout)
         except InitialisationError:
-            return FrameResult(
-                self._frame, det.timestamp, Status.INITIALISING, _NAN33, _NAN3, _NAN33, _NAN3,
-                _NAN3, _NAN3, None, np.full(det.count, -1), 0, det.count,
-            )
+            return FrameResult.empty(self._frame, det.timestamp, Status.INITIALISING, det.count)
         self.R_c0, self.t_c0, self.layout = init.R_ch, init.t_ch, init.layout
         rot = np.kron(np.eye(2), self.R_c0.T)  # camera-frame pose covariance -> W0
         P0 = ConstantRateModel().initial_covariance(rot @ init.cov @ rot.T)
@@ -236,9 +231,10 @@ class StoneSoupTracker:
         R = so3_exp(x[:3])
         P = np.asarray(state.covar, dtype=float)
         return FrameResult(
-            self._frame, det.timestamp, status, self.R_c0 @ R, self.R_c0 @ x[3:6] + self.t_c0, R,
-            x[3:6].copy(), x[6:9].copy(), x[9:12].copy(), P, labels, n_assoc,
-            int(np.sum(labels < 0)),
+            frame=self._frame, timestamp=det.timestamp, status=status, R_ch=self.R_c0 @ R,
+            t_ch=self.R_c0 @ x[3:6] + self.t_c0, R=R, p=x[3:6].copy(), v=x[6:9].copy(),
+            w=x[9:12].copy(), cov=P, labels=labels, n_visible=n_assoc,
+            n_clutter=int(np.sum(labels < 0)),
         )
 
 

@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from benchmarks.crlb import pose_crlb
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import depth_sigma
 from wristtrack.hand import HandLayout
 from wristtrack.tracking.pose_fit import refine_pose
 
@@ -67,7 +68,7 @@ def test_bound_matches_scatter_of_refine_pose(with_depth):
     rng = np.random.default_rng(1)
     X = layout.points @ R.T + t
     uv0, z0 = CAM.project(X), X[:, 2]
-    sz = 1.425e-3 * z0**2
+    sz = depth_sigma(z0)
     errs = []
     for _ in range(800):
         uv = uv0 + rng.normal(0, SIGMA, uv0.shape)

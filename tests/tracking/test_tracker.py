@@ -192,3 +192,14 @@ def test_one_to_one_association_beats_the_paper_rule_with_clutter_beside_the_mar
     assert gnn.errors.orientation_rmse_deg < paper.errors.orientation_rmse_deg
     assert gnn.labelling["markers_correct"] >= 0.99
     assert gnn.errors.orientation_rmse_deg <= 1.5
+
+
+def test_frame_result_empty_is_a_result_without_an_estimate():
+    from wristtrack.tracking.results import FrameResult
+
+    r = FrameResult.empty(4, 0.5, Status.LOST, 3)
+    assert not r.has_estimate and r.cov is None and r.x is None
+    assert np.isnan(r.R_ch).all() and np.isnan(r.t_ch).all() and np.isnan(r.w).all()
+    assert r.labels.tolist() == [-1, -1, -1] and r.n_clutter == 3 and r.n_visible == 0
+    labelled = FrameResult.empty(5, 0.6, Status.INITIALISING, np.array([0, -1]), side="left")
+    assert labelled.n_clutter == 1 and labelled.side == "left"
