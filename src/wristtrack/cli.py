@@ -190,12 +190,25 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    from wristtrack.analysis.compare import compare, format_comparison, write_comparison
+
+    result = compare(args.run_dir, args.reference, markers=args.markers, cluster=args.cluster,
+                     fit_ratio=not args.no_clock_ratio, max_lag_s=args.max_lag)
+    json_path, html_path = write_comparison(args.out, result)
+    print(format_comparison(result.result))
+    print(f"wrote {json_path} and {html_path}")
+    return 0
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from wristtrack.sim.realism import EFFECTS, PRESET_REAL
     from wristtrack.sim.render import render_recording
 
     effects = set(PRESET_REAL if args.preset == "real" else ())
     effects |= {e for e in EFFECTS if getattr(args, e, False)}
+    if args.motion or args.cluster:
+        return _simulate_recorded(args, sorted(effects))
     options = {"effects": sorted(effects), "hand_side": args.hand_side}
     if args.n_frames is not None:
         options["n_frames"] = args.n_frames
@@ -204,6 +217,28 @@ def _simulate(args: argparse.Namespace) -> int:
     side = "" if args.hand_side == "right" else f", {args.hand_side} hand"
     print(f"wrote simulated recording {out} (ground truth in {out}/truth.csv; effects: "
           f"{', '.join(sorted(effects)) or 'none'}{side})")
+    return 0
+
+
+def _simulate_recorded(args: argparse.Namespace, effects: list[str]) -> int:
+    from wristtrack.sim.recorded import ReferenceSettings, render_recorded
+
+    if not (args.motion and args.cluster):
+        raise WristtrackError("--motion FILE and --cluster A,B,C go together")
+    reference = ReferenceSettings(
+        rate_hz=args.reference_rate, offset_s=args.reference_offset,
+        ratio=args.reference_clock_ratio, noise_mm=args.reference_noise,
+    )
+    out = render_recorded(
+        args.out, args.motion, [s.strip() for s in args.cluster.split(",") if s.strip()],
+        seed=args.seed, overwrite=args.overwrite, fps=args.fps, start_s=args.motion_start,
+        duration_s=args.motion_duration, speed=args.speed, position_scale=args.position_scale,
+        rotation_scale=args.rotation_scale, reference=reference, effects=tuple(effects),
+        hand_side=args.hand_side,
+    )
+    print(f"wrote simulated recording {out} of {args.motion} (ground truth in {out}/truth.csv; "
+          f"the motion-capture reference in {out}/reference.c3d, planted values in "
+          f"{out}/reference.json)")
     return 0
 
 
@@ -356,6 +391,23 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--truth", help="truth.csv of the simulated recording")
     evaluate.set_defaults(handler=_evaluate)
 
+    comp = sub.add_parser(
+        "compare", help="agreement of a run with a reference system (C3D, TRC, Qualisys TSV or "
+        "a truth.csv): comparison.json and comparison.html",
+    )
+    comp.add_argument("run_dir", help="output folder of 'wristtrack track'")
+    comp.add_argument("reference", help="reference recording: .c3d, .trc, .tsv or truth.csv")
+    comp.add_argument("--out", required=True, help="folder for comparison.json and .html")
+    comp.add_argument("--markers", metavar="WRIST=LABEL,...",
+                      help="our markers' labels in the reference (three or more, or WRIST)")
+    comp.add_argument("--cluster", metavar="A,B,C",
+                      help="labels of a rigid cluster of 3+ markers on the back of the hand")
+    comp.add_argument("--no-clock-ratio", action="store_true",
+                      help="fit the time offset only (assume both clocks run at the same rate)")
+    comp.add_argument("--max-lag", type=float, metavar="S",
+                      help="search the time offset within +-S seconds only")
+    comp.set_defaults(handler=_compare)
+
     simulate = sub.add_parser("simulate", help="write a synthetic RGB-D recording with truth")
     simulate.add_argument("out", help="folder to create")
     simulate.add_argument("--scenario", default="deviation")
@@ -371,6 +423,27 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in _SIM_EFFECT_HELP.items():
         simulate.add_argument(f"--{name.replace('_', '-')}", dest=name, action="store_true",
                               help=text)
+    rec = simulate.add_argument_group("recorded motion (instead of --scenario)")
+    rec.add_argument("--motion", metavar="FILE",
+                     help="drive the hand with a recorded cluster's motion (.c3d, .trc, .tsv)")
+    rec.add_argument("--cluster", metavar="A,B,C", help="the cluster's marker labels in FILE")
+    rec.add_argument("--motion-start", type=float, metavar="S",
+                     help="segment start in FILE (default: its longest stretch without gaps)")
+    rec.add_argument("--motion-duration", type=float, metavar="S", help="segment length")
+    rec.add_argument("--speed", type=float, default=1.0,
+                     help="play the motion this much faster (< 1: slower; stated in metadata)")
+    rec.add_argument("--position-scale", type=float, default=1.0,
+                     help="shrink the displacement (to stay in view)")
+    rec.add_argument("--rotation-scale", type=float, default=1.0,
+                     help="shrink the angular velocity")
+    rec.add_argument("--fps", type=float, default=30.0, help="camera frame rate")
+    rec.add_argument("--reference-rate", type=float, default=100.0, metavar="HZ",
+                     help="the motion-capture system's rate")
+    rec.add_argument("--reference-offset", type=float, default=0.4173, metavar="S",
+                     help="planted clock offset (reference time = offset + ratio x camera time)")
+    rec.add_argument("--reference-clock-ratio", type=float, default=1.0002, metavar="R")
+    rec.add_argument("--reference-noise", type=float, default=0.05, metavar="MM",
+                     help="marker noise of the reference, per coordinate")
     simulate.set_defaults(handler=_simulate)
     return parser
 

@@ -285,14 +285,18 @@ def render_recorded(
     position_scale: float = 1.0,
     rotation_scale: float = 1.0,
     reference: ReferenceSettings | None = None,
+    effects: tuple[str, ...] = (),
+    hand_side: str = "right",
 ) -> Path:
     """Render the recorded motion as a recording folder (with truth.csv) and write the
-    motion-capture reference beside it; returns the folder."""
+    motion-capture reference beside it; returns the folder. ``effects`` and ``hand_side`` as
+    for the scripted scenarios (wristtrack.sim.scenes.with_effects)."""
     from wristtrack.sim.render import render_recording
+    from wristtrack.sim.scenes import with_effects
 
     rec = load_recorded_motion(motion_file, cluster, start_s, duration_s, speed,
                                position_scale, rotation_scale)
-    scene = recorded_scene(rec, fps)
+    scene = with_effects(recorded_scene(rec, fps), effects, hand_side)
     out = render_recording(out, scene, seed=seed, overwrite=overwrite)
     write_reference(out, scene, rec, scene.layout.points, reference or ReferenceSettings())
     return Path(out)

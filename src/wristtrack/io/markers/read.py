@@ -14,7 +14,7 @@ def read_markers(path: str | Path) -> MarkerData:
     """Marker trajectories (metres) of ``path``, by its suffix."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"reference file {path} not found")
+        raise InputError(f"marker file {path} not found")
     suffix = path.suffix.lower()
     if suffix == ".c3d":
         from wristtrack.io.markers.c3d import read_c3d
