@@ -31,6 +31,8 @@ def _config(args: argparse.Namespace):
 
 
 def _track(args: argparse.Namespace) -> int:
+    if args.live is not None:
+        return _track_live(args)
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
     from wristtrack.io.open import open_recording
@@ -44,9 +46,12 @@ def _track(args: argparse.Namespace) -> int:
                      ("info_topic", args.info_topic))
         if v
     }
-    source = f"live:{args.live}" if args.live is not None else args.input
+    source = args.input
     if source is None:
-        raise WristtrackError("give a recording to track, or --live INDEX for a camera")
+        raise WristtrackError("give a recording to track, or --live SOURCE for a camera")
+    if args.view or args.record or args.port is not None:
+        raise WristtrackError("--view, --port and --record are for --live SOURCE; a recording "
+                              "is tracked offline")
     labels = None
     if args.labels:
         from wristtrack.pipeline.label import ManualLabels
@@ -86,6 +91,60 @@ def _track(args: argparse.Namespace) -> int:
 
         print(format_reaches(summary["kinematics"]))
     # Exports last: they read the run folder's final poses.csv (smoothed, if asked for).
+    for fmt in dict.fromkeys(args.export or ()):
+        _export_one(args.out, fmt, None, "mm")
+    if args.overlay:
+        print(f"wrote overlay video {args.overlay}")
+    if not args.no_report:
+        from wristtrack.report.html import write_report
+
+        print(f"wrote {write_report(args.out)} (figures in {args.out}/figures)")
+    return 0
+
+
+def _track_live(args: argparse.Namespace) -> int:
+    """``track --live SOURCE``: real time (pipeline.live), with the live page and recording."""
+    import contextlib
+
+    from wristtrack.camera import Camera
+    from wristtrack.hand import HandLayout
+    from wristtrack.io.live_sources import open_live
+    from wristtrack.pipeline.live import track_live
+
+    if args.input:
+        raise WristtrackError(f"give a recording ({args.input}) or --live SOURCE, not both")
+    refused = [flag for flag, on in (("--resume", args.resume), ("--smooth", args.smooth),
+                                     ("--labels", args.labels)) if on]
+    if refused:
+        raise WristtrackError(
+            f"{', '.join(refused)} cannot be used with --live (live tracking is causal and runs "
+            "once); add --record DIR and track that folder offline with them"
+        )
+    if args.port is not None and not args.view:
+        raise WristtrackError("--port is the --view page's port; add --view")
+    camera = Camera.load(args.camera) if args.camera else None
+    hand = HandLayout.load(args.hand) if args.hand else None
+    with open_live(args.live, camera=camera, hand=hand) as source, \
+            _overlay(args.overlay, source) as overlay, contextlib.ExitStack() as stack:
+        view = None
+        if args.view:
+            from wristtrack.pipeline.live_view import DEFAULT_PORT, LiveView
+
+            layout = source.hand.points if source.hand is not None else None
+            port = DEFAULT_PORT if args.port is None else args.port
+            view = stack.enter_context(LiveView(source.camera, layout, port, str(source.source)))
+            print(f"live view: {view.url} (Ctrl-C ends the session)", flush=True)
+        summary, live = track_live(source, args.out, _config(args), record=args.record,
+                                   view=view, overlay=overlay)
+    frames, lat = live["frames"], live["latency_ms"]
+    print(f"tracked {summary['frames']['tracked']} of {frames['total']} frames "
+          f"({frames['dropped']} dropped); latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} "
+          f"ms; wrote {args.out}/poses.csv, summary.json and live.json")
+    if live.get("record"):
+        rec = live["record"]
+        print(f"recorded {rec['frames']} frames to {rec['folder']}"
+              + (f" ({rec['lost']} lost: {rec['error'] or 'the disk fell behind'})"
+                 if rec["lost"] else ""))
     for fmt in dict.fromkeys(args.export or ()):
         _export_one(args.out, fmt, None, "mm")
     if args.overlay:
@@ -308,7 +367,19 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--out", required=True, help="output folder")
     track.add_argument("--camera", help="camera.json (required for a video or a live camera)")
     track.add_argument("--hand", help="hand.json (marker layout); else the recording's or depth")
-    track.add_argument("--live", type=int, metavar="INDEX", help="track a live camera")
+    track.add_argument(
+        "--live", metavar="SOURCE",
+        help="track a live camera in real time: realsense[:SERIAL|:FILE.bag], "
+        "openni[:URI|:FILE.oni], replay:RECORDING (a folder played as a camera) or an OpenCV "
+        "camera index; Ctrl-C ends the session",
+    )
+    track.add_argument("--view", action="store_true",
+                       help="with --live: serve a live page (overlay video, angle traces, range "
+                       "of motion) on 127.0.0.1")
+    track.add_argument("--port", type=int, metavar="N",
+                       help="port of the --view page (default 8765; 0 picks a free one)")
+    track.add_argument("--record", metavar="DIR",
+                       help="with --live: also write the raw frames as a recording folder")
     track.add_argument("--model", choices=sorted(MODELS), default="default")
     track.add_argument("--association", choices=METHODS, default="gnn")
     track.add_argument("--no-depth", action="store_true", help="do not use depth in updates")

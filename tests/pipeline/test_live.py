@@ -1,0 +1,194 @@
+"""Live tracking without hardware: a rendered recording replayed as a camera (`--live replay:`).
+
+Truth: the offline run of the same folder (the live loop must give the same poses on the frames
+it processes), the recording's own frame list (every frame is accounted for: processed or
+dropped, one poses.csv row each) and, for --record, the recording itself.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from wristtrack.cli import main
+from wristtrack.io.base import Recording
+from wristtrack.io.folder import FolderRecording
+from wristtrack.io.poses import read_poses
+from wristtrack.pipeline.live import Captured, NewestFrameSlot, track_live
+from wristtrack.pipeline.track import track_recording
+
+ANGLES = ("deviation_deg", "flexion_deg", "pronation_deg")
+
+
+@pytest.fixture(scope="module")
+def reach(rendered):
+    return rendered("reach")  # 127 frames at 30 fps, shared with the report and resume tests
+
+
+@pytest.fixture(scope="module")
+def offline(reach, tmp_path_factory):
+    out = tmp_path_factory.mktemp("offline")
+    with FolderRecording(reach) as rec:
+        track_recording(rec, out, progress=False)
+    return read_poses(out / "poses.csv")
+
+
+def _agree(live, offline, deg, mm):
+    """Angles and positions of the frames the live run processed, against the offline run."""
+    rows = np.asarray(live["frame"], int)
+    done = np.isin(live["status"], ("tracking", "coasting"))
+    assert done.sum() > 0.9 * (live["status"] != "dropped").sum()
+    for col in ANGLES:
+        err = np.abs(live[col][done] - offline[col][rows[done]])
+        assert np.nanmax(err) <= deg, col
+    for col in ("tx", "ty", "tz"):
+        err = np.abs(live[col][done] - offline[col][rows[done]]) * 1e3
+        assert np.nanmax(err) <= mm, col
+
+
+def test_newest_frame_wins_and_the_rest_are_counted():
+    from wristtrack.io.base import Frame
+
+    slot = NewestFrameSlot()
+    frames = [Frame(i, i / 30, np.zeros((2, 2, 3), np.uint8)) for i in range(4)]
+    for f in frames[:3]:
+        slot.put(Captured(f, 0.0))
+    item, dropped = slot.take(0.01)
+    assert item.frame.index == 2 and dropped == [(0, 0.0), (1, 1 / 30)]
+    assert slot.take(0.01) == (None, [])  # nothing new: a timeout, not the end
+    slot.put(Captured(frames[3], 0.0))
+    slot.end()
+    item, dropped = slot.take(0.01)
+    assert item.frame.index == 3 and dropped == [] and slot.ended
+    assert slot.take(0.01) == (None, [])
+
+
+def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
+    reach, offline, tmp_path, capsys, check_run
+):
+    run, copy = tmp_path / "run", tmp_path / "copy"
+    code = main(["track", "--live", f"replay:{reach}", "--out", str(run), "--record", str(copy),
+                 "--no-report"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "latency p50" in out and f"recorded 127 frames to {copy}" in out
+    assert subprocess.run([sys.executable, str(check_run), str(run)]).returncode == 0
+
+    live = json.loads((run / "live.json").read_text())
+    poses = read_poses(run / "poses.csv")
+    n = len(FolderRecording(reach))
+    # every frame accounted for, in order: processed or dropped, one row each
+    assert live["frames"]["total"] == n == len(poses["frame"])
+    np.testing.assert_array_equal(poses["frame"], np.arange(n))
+    assert live["frames"]["processed"] + live["frames"]["dropped"] == n
+    assert sorted(poses["frame"][poses["status"] == "dropped"].astype(int)) == \
+        live["dropped_frames"]
+    assert len(live["per_frame"]["latency_ms"]) == live["frames"]["processed"]
+    assert 0 < live["latency_ms"]["p50"] <= live["latency_ms"]["p95"] <= live["latency_ms"]["max"]
+    assert live["frame_period_ms"] == pytest.approx(1000 / 30, rel=1e-6)
+    assert live["ended_by"] == "end of stream"
+    _agree(poses, offline, deg=0.5, mm=1.0)  # exact without drops; a drop perturbs a few frames
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["settings"]["live"] and summary["live"]["frames"] == live["frames"]
+
+    # --record: the same frames, timestamps and camera, so offline re-tracking gives the poses
+    # of the recording itself (the live run's within filter noise)
+    original, recorded = FolderRecording(reach), FolderRecording(copy)
+    assert recorded.camera == original.camera and len(recorded) == n
+    for a, b in zip(original.frames(), recorded.frames(), strict=True):
+        assert a.timestamp == b.timestamp
+        np.testing.assert_array_equal(a.bgr, b.bgr)
+        np.testing.assert_array_equal(a.depth, b.depth)
+    assert main(["track", str(copy), "--out", str(tmp_path / "again"), "--no-progress",
+                 "--no-report"]) == 0
+    again = read_poses(tmp_path / "again" / "poses.csv")
+    for col in ANGLES + ("tx", "ty", "tz"):
+        np.testing.assert_allclose(again[col], offline[col], atol=1e-9, equal_nan=True)
+    _agree(poses, again, deg=0.5, mm=1.0)
+
+
+class Burst(Recording):
+    """The first frames of a recording, decoded up front and delivered 1 ms apart (their own
+    timestamps kept): a camera far faster than the tracker."""
+
+    kind = "test burst"
+
+    def __init__(self, folder, n):
+        rec = FolderRecording(folder)
+        super().__init__(f"burst:{folder}", rec.camera, rec.hand)
+        self._frames_list = [f for _, f in zip(range(n), rec.frames(), strict=False)]
+
+    def _frames(self, start=0):
+        for frame in self._frames_list:
+            time.sleep(0.001)
+            yield frame
+
+
+def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, offline, tmp_path):
+    n = 60
+    summary, live = track_live(Burst(reach, n), tmp_path / "run")
+    poses = read_poses(tmp_path / "run" / "poses.csv")
+    np.testing.assert_array_equal(poses["frame"], np.arange(n))  # a row for every frame
+    dropped = poses["status"] == "dropped"
+    assert live["frames"]["dropped"] == int(dropped.sum()) > n / 2
+    assert live["frames"]["processed"] == n - dropped.sum()
+    assert live["dropped_frames"] == poses["frame"][dropped].astype(int).tolist()
+    assert np.isnan(poses["qw"][dropped]).all() and np.isnan(poses["flexion_deg"][dropped]).all()
+    # One slot, no queue: a frame waits at most for the frame being processed, so its latency
+    # is bounded by two processing times (a queue would make it grow frame after frame).
+    proc = np.asarray(live["per_frame"]["processing_ms"])
+    lat = np.asarray(live["per_frame"]["latency_ms"])
+    assert (lat[1:] <= 2 * proc.max() + 15).all()
+    assert summary["frames"]["tracked"] == live["frames"]["processed"]
+    _agree(poses, offline, deg=3.0, mm=5.0)
+
+
+def test_ctrl_c_ends_the_session_with_complete_outputs(reach, tmp_path):
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wristtrack.cli", "track", "--live", f"replay:{reach}", "--out",
+         str(run), "--no-report"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:  # wait until frames are being tracked
+        if (run / "poses.csv").exists() and (run / "poses.csv").read_text().count("\n") > 10:
+            break
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "tracked" in out
+    live = json.loads((run / "live.json").read_text())
+    summary = json.loads((run / "summary.json").read_text())
+    assert live["ended_by"] == "SIGINT" and not summary["interrupted"]
+    assert 10 <= live["frames"]["total"] < 127
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--live", "replay:/no/such/rec"], "recording folder /no/such/rec not found"),
+        (["--live", "tv"], "--live tv: unknown source; give realsense"),
+        (["--live", "replay:REC", "--smooth"], "--smooth cannot be used with --live"),
+        (["--live", "replay:REC", "--port", "9"], "--port is the --view page's port; add --view"),
+        (["REC", "--record", "x"], "--view, --port and --record are for --live SOURCE"),
+    ],
+)
+def test_bad_live_options_are_one_line(reach, tmp_path, capsys, argv, message):
+    argv = [a.replace("REC", str(reach)) for a in argv]
+    assert main(["track", *argv, "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+
+
+def test_record_refuses_an_existing_recording(reach, tmp_path, capsys):
+    assert main(["track", "--live", f"replay:{reach}", "--out", str(tmp_path / "run"),
+                 "--record", str(reach)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "already exists and is not empty" in err and "\n" not in err
