@@ -129,7 +129,7 @@ class LiveView:
             since = min(max(since, 0), len(self._traces))
             data = {**self._state, "version": self._version, "rom": rom,
                     "next": len(self._traces),
-                    "traces": [[None if x != x else round(x, 3) for x in row]
+                    "traces": [[row[0]] + [None if x != x else round(x, 3) for x in row[1:]]
                                for row in self._traces[since:]]}
         if data["finished"]:
             self._finished_seen.set()
