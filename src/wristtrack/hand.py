@@ -3,7 +3,10 @@
 Hand frame (DESIGN.md section 2): origin at the WRIST marker centre, +X from WRIST towards MCP3,
 +Z normal to the palm plane out of the back of the hand (towards the camera in the neutral pose),
 +Y = Z x X (the thumb side of a right hand). The paper's model is planar: marker k at
-(L_k cos a_k, L_k sin a_k, 0), with a = 0 for MCP3 by definition.
+(L_k cos a_k, L_k sin a_k, 0), with a = 0 for MCP3 by definition. Real palms are not: for a
+non-planar layout +X runs exactly from WRIST to MCP3 (MCP3 = (L, 0, 0)) and +Z is the normal of
+the markers' least-squares plane made perpendicular to X; a layout estimated from depth keeps
+the heights depth measured (averaged over the frames of a still hand, :func:`average_layout`).
 """
 
 from __future__ import annotations
@@ -239,49 +242,99 @@ class HandLayout:
 def hand_frame_from_points(points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hand frame (R_ch (3,3), t_ch (3,)) from 6 marker centres (6,3) in the camera frame.
 
-    Origin WRIST; Z = normal of the least-squares palm plane, oriented towards the camera
-    (Z . (camera - wrist) > 0, the camera being the origin); X = WRIST -> MCP3 projected into
-    the plane; Y = Z x X. Columns of R_ch are the hand axes in camera coordinates.
+    DESIGN.md section 2: origin WRIST; X exactly from WRIST to MCP3; Z the normal of the
+    least-squares plane of the six markers made perpendicular to X, oriented towards the camera
+    (Z . (camera - wrist) > 0, the camera being the origin); Y = Z x X. For coplanar markers Z
+    is the plane's normal. Columns of R_ch are the hand axes in camera coordinates.
     """
     p = _check_points(points_cam)
     wrist = p[0]
-    # Smallest right-singular vector of the centred cloud = least-squares plane normal.
-    z = np.linalg.svd(p - p.mean(axis=0))[2][2]
-    if z @ (-wrist) < 0:
-        z = -z
     v = p[MCP3_INDEX] - wrist
-    x = v - (v @ z) * z
-    norm = np.linalg.norm(x)
+    norm = np.linalg.norm(v)
     if norm < 1e-9:
         raise LayoutEstimateError(
-            "markers measured at initialisation: MCP3 coincides with WRIST in the palm plane; "
-            "check the marker labels"
+            "markers measured at initialisation: MCP3 coincides with WRIST; check the marker "
+            "labels"
         )
-    x = x / norm
+    x = v / norm
+    # Smallest right-singular vector of the centred cloud = least-squares plane normal.
+    n = np.linalg.svd(p - p.mean(axis=0))[2][2]
+    z = n - (n @ x) * x
+    z_norm = np.linalg.norm(z)
+    if z_norm < 1e-9:  # the plane's normal along WRIST -> MCP3: not a hand
+        raise LayoutEstimateError(
+            "markers measured at initialisation: no palm plane across WRIST -> MCP3; check the "
+            "marker labels"
+        )
+    z = z / z_norm
+    if z @ (-wrist) < 0:
+        z = -z
     y = np.cross(z, x)
     return np.column_stack([x, y, z]), wrist.copy()
 
 
-def estimate_layout(points_cam: np.ndarray) -> tuple[HandLayout, np.ndarray, np.ndarray]:
+def estimate_layout(
+    points_cam: np.ndarray, planar: bool = False
+) -> tuple[HandLayout, np.ndarray, np.ndarray]:
     """Hand layout and pose from 3-D marker centres (6,3) measured in the camera frame.
 
     E.g. back-projected blob depths of a still hand. The frame is :func:`hand_frame_from_points`;
-    the layout is the markers in that frame with their out-of-plane component set to 0 (the
-    paper's planar model). Returns (layout, R_ch, t_ch) with p_cam ~ R_ch @ p_hand + t_ch.
-    Raises LayoutEstimateError (a ConfigError and an InitialisationError) if the measured layout
-    fails :meth:`HandLayout.validate`.
+    the layout is the markers in that frame, with the heights (z) depth measured, or set to 0
+    with ``planar`` (the paper's planar model). Returns (layout, R_ch, t_ch) with
+    p_cam ~ R_ch @ p_hand + t_ch. Raises LayoutEstimateError (a ConfigError and an
+    InitialisationError) if the measured layout fails :meth:`HandLayout.validate`.
     """
     p = _check_points(points_cam)
     R_ch, t_ch = hand_frame_from_points(p)
     local = (p - t_ch) @ R_ch
-    local[:, 2] = 0.0
-    local[MCP3_INDEX, 1] = 0.0  # zero up to rounding by construction; make it exact
+    if planar:
+        local[:, 2] = 0.0
+    local[0] = 0.0  # WRIST is the origin and MCP3 on +X by construction: make both exact
+    local[MCP3_INDEX, 1:] = 0.0
     layout = HandLayout(local)
     try:
         layout.validate("hand layout measured at initialisation")
     except ConfigError as e:
         raise LayoutEstimateError(str(e)) from None
     return layout, R_ch, t_ch
+
+
+def average_layout(
+    frames_cam: np.ndarray, planar: bool = False
+) -> tuple[HandLayout, np.ndarray, np.ndarray, float]:
+    """Layout from the marker centres of several frames of a still hand (F,6,3), camera frame.
+
+    One frame's depths are noisy (a structured-light camera: ~1.4 mm at 0.7 m, correlated over
+    a marker), and a layout that keeps the measured heights keeps that noise: so the frames are
+    aligned rigidly onto their mean shape (generalised Procrustes, two rounds, which also absorbs
+    a little drift of a hand that is only nearly still) and averaged. Frames with a non-finite
+    point are left out. Returns (layout, R_ch, t_ch, rms_m): the pose is that of the LAST usable
+    frame (where a tracker stands when the still start ends), ``rms_m`` the RMS distance of the
+    aligned frames from the mean shape (the depth noise that averaging removed, times
+    sqrt(F)). Raises InputError when no frame is usable, LayoutEstimateError as
+    :func:`estimate_layout`.
+    """
+    f = np.asarray(frames_cam, dtype=np.float64)
+    if f.ndim != 3 or f.shape[1:] != (6, 3):
+        raise InputError(
+            f"marker centres of a still hand must be (frames, 6, 3), got shape {f.shape}"
+        )
+    f = f[np.isfinite(f).all(axis=(1, 2))]
+    if len(f) == 0:
+        raise InputError("no frame with all six marker centres finite (no depth?)")
+    mean = f[-1]
+    for _ in range(2):
+        aligned = np.stack([_onto(frame, mean) for frame in f])
+        mean = aligned.mean(axis=0)
+    rms = float(np.sqrt(np.mean(np.sum((aligned - mean) ** 2, axis=-1))))
+    layout, R_ch, t_ch = estimate_layout(mean, planar)
+    return layout, R_ch, t_ch, rms
+
+
+def _onto(points: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``points`` (6,3) moved rigidly onto ``target`` (6,3) (least squares, no scale)."""
+    R, t = fit_pose(HandLayout(points), target)
+    return points @ R.T + t
 
 
 def fit_pose(layout: HandLayout, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
