@@ -2,7 +2,7 @@
 round cones, the forearm, and the marker rims, all in the hand frame (the forearm in W0 axes).
 
 A planar layout gets a flat-topped, bevelled palm (the markers lie on its top); a 3-D layout
-(knuckles above, thumb base below the wrist marker's plane) gets the convex hull of discs at
+(knuckles above, thumb base below the wrist marker's plane) gets convex hulls of discs at
 each marker's height, so every marker still sits on the skin. Fingers can flex: their chains
 curl further, which is what moves the skin over the knuckles (soft-tissue motion, see
 :mod:`wristtrack.sim.realism`).
@@ -34,9 +34,9 @@ class HandModel:
     """Hand geometry in the hand frame, forearm in W0 axes (it moves with the wrist only)."""
 
     layout: HandLayout
-    palm: tuple[np.ndarray, np.ndarray, np.ndarray]  # convex solid planes and vertices
-    palm_albedo: np.ndarray  # (P,3)
-    palm_part: np.ndarray  # (P,)
+    palm: list[tuple[np.ndarray, np.ndarray, np.ndarray]]  # convex solids: planes, vertices
+    palm_albedo: list[np.ndarray]  # (P,3) per solid
+    palm_part: list[np.ndarray]  # (P,) per solid
     cones: np.ndarray  # (N,8): ax ay az bx by bz ra rb, hand frame, fingers at rest
     forearm: np.ndarray  # (8,) the same, W0 axes, relative to the wrist
     rim: np.ndarray  # (6,M,3) marker rim points, hand frame
@@ -73,7 +73,7 @@ def _outline(p: np.ndarray) -> np.ndarray:
     return np.vstack([(p[:, None, :2] + ring).reshape(-1, 2), [[-0.024, 0.027], [-0.024, -0.027]]])
 
 
-def _flat_palm(p: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]:
+def _flat_palm(p: np.ndarray) -> tuple[list[tuple[np.ndarray, ...]], list, list]:
     """Convex prism around the outline, 3 cm thick under the back (z = 0), 4 mm top bevel."""
     hull = cv2.convexHull(_outline(p).astype(np.float32))[:, 0].astype(float)
     hull = cv2.approxPolyDP(hull.astype(np.float32), 0.001, True)[:, 0].astype(float)
@@ -85,24 +85,39 @@ def _flat_palm(p: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.nd
     albedo[1] = PALM_SIDE
     part = np.full(n_faces, HAND, dtype=np.uint8)
     part[0] = DORSUM
-    return palm, albedo, part
+    return [palm], [albedo], [part]
 
 
-def _arched_palm(p: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]:
-    """Convex hull of the outline discs, each at its marker's height (the wrist's width at the
-    wrist's), over a flat underside: an arched back that carries every marker."""
-    xy = _outline(p)
-    z_top = np.concatenate([np.repeat(p[:, 2], 12), [p[0, 2], p[0, 2]]])
+def _arched_palm(p: np.ndarray) -> tuple[list[tuple[np.ndarray, ...]], np.ndarray, np.ndarray]:
+    """Two convex solids over a flat underside, each the hull of 13 mm discs at their markers'
+    heights: the back of the hand (WRIST, MCP2..MCP5 and the wrist's width) and the thenar
+    side around CMC1. One hull cannot carry a thumb base lower than the line from the wrist to
+    the knuckles (it would be buried under the hull), two can, with a step between them."""
+    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    ring = 0.013 * np.column_stack([np.cos(ang), np.sin(ang)])
+    thumb = 1.0 if p[1, 1] >= 0 else -1.0
     bottom = p[:, 2].min() - PALM_THICKNESS
-    pts = np.vstack([np.column_stack([xy, z_top]),
-                     np.column_stack([xy, np.full(len(xy), bottom)])])
-    hull = ConvexHull(pts)
-    eq = np.unique(np.round(hull.equations, 9), axis=0)  # coplanar triangles: one plane
-    normals, offsets = eq[:, :3], -eq[:, 3]
-    albedo = np.tile(SKIN, (len(eq), 1))
-    albedo[normals[:, 2] < -0.9] = PALM_SIDE
-    part = np.where(normals[:, 2] > 0.5, DORSUM, HAND).astype(np.uint8)
-    return (normals, offsets, pts[hull.vertices]), albedo, part
+
+    def discs(idx, extra):
+        top = np.vstack([np.column_stack([p[k, :2] + ring, np.full(12, p[k, 2])]) for k in idx]
+                        + [extra])
+        return np.vstack([top, np.column_stack([top[:, :2], np.full(len(top), bottom)])])
+
+    # The back's thumb-side wrist corner is kept clear of the CMC1 marker's disc.
+    back = discs([0, 2, 3, 4, 5], [[-0.024, 0.020 * thumb, p[0, 2]], [-0.024, -0.027 * thumb,
+                                                                        p[0, 2]]])
+    thenar = discs([1], [[-0.024, 0.027 * thumb, p[1, 2]]])
+    planes, albedo, part = [], [], []
+    for pts in (back, thenar):
+        hull = ConvexHull(pts)
+        eq = np.unique(np.round(hull.equations, 9), axis=0)  # coplanar triangles: one plane
+        normals = eq[:, :3]
+        planes.append((normals, -eq[:, 3], pts[hull.vertices]))
+        alb = np.tile(SKIN, (len(eq), 1))
+        alb[normals[:, 2] < -0.9] = PALM_SIDE
+        albedo.append(alb)
+        part.append(np.where(normals[:, 2] > 0.5, DORSUM, HAND).astype(np.uint8))
+    return planes, albedo, part
 
 
 def _hand_cones(p: np.ndarray, flexion_deg: float) -> list[np.ndarray]:

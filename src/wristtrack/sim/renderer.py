@@ -114,7 +114,8 @@ class Renderer:
             flex = float(realism.finger_flexion_deg(t, self.t0))
             cones = m.finger_cones(flex)
             markers = markers + realism.skin_slide(flex, self.scene.layout)
-        palm = place_solid(m.palm, R, tr, m.palm_albedo, m.palm_part)
+        palm = [place_solid(planes, R, tr, albedo, part)
+                for planes, albedo, part in zip(m.palm, m.palm_albedo, m.palm_part, strict=True)]
         n = len(cones)
         sets = [Cones(cones[:, :3] @ R.T + tr, cones[:, 3:6] @ R.T + tr, cones[:, 6],
                       cones[:, 7], np.tile(SKIN, (n, 1)), np.full(n, HAND, np.uint8))]
@@ -124,7 +125,7 @@ class Renderer:
             pen = self._occluder(self.scene.occlusion, t, R, tr)
             if pen is not None:
                 sets.append(pen)
-        return _Moment(Layer([palm], Cones.concat(sets), R, tr), markers)
+        return _Moment(Layer(palm, Cones.concat(sets), R, tr), markers)
 
     def layer(self, t: float) -> Layer:
         return self.moment(t).layer

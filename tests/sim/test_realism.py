@@ -1,0 +1,387 @@
+"""The simulator's realism effects against independent truth: the statistics of real OpenNI depth
+frames (../shared/realdata), cv2.projectPoints with the camera's distortion, a hand-written
+bilinear demosaic, geometry worked out here rather than in the renderer."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from wristtrack.camera import Camera
+from wristtrack.cli import main
+from wristtrack.depth_noise import depth_sigma_nguyen
+from wristtrack.errors import ConfigError
+from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.poses import read_poses
+from wristtrack.sim import realism
+from wristtrack.sim.hand_model import MARKER_RADIUS
+from wristtrack.sim.motion import still
+from wristtrack.sim.renderer import Renderer
+from wristtrack.sim.scenes import custom_scene, make_scene, with_effects
+from wristtrack.sim.sensor import bayer_round_trip, jpeg_round_trip
+from wristtrack.sim.shading import LIGHT
+
+REAL_FRAMES = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "pcl_openni_frames"
+
+
+def _first(scene, seed=0, k=0):
+    r = Renderer(scene, seed)
+    frame = None
+    for t in scene.times[:k + 1]:
+        frame = r.frame(float(t))
+    return r, frame
+
+
+@pytest.fixture(scope="module")
+def real_depth():
+    files = sorted(REAL_FRAMES.glob("*_depth.tiff"))
+    if not files:
+        pytest.skip(f"no real OpenNI frames in {REAL_FRAMES} (../shared/realdata beside the repo)")
+    return [cv2.imread(str(f), cv2.IMREAD_UNCHANGED) for f in files]
+
+
+@pytest.fixture(scope="module")
+def structured():
+    """Frame 0 of 'deviation' with structured-light depth, and the same frame plain."""
+    sc = make_scene("deviation", 0, n_frames=2)
+    sl = with_effects(sc, ["structured_light"])
+    return _first(sl), _first(sc)
+
+
+def _step_sizes(depth_mm: np.ndarray, z_m: float, half_band_m: float = 0.04) -> float:
+    """Mean spacing (m) of the distinct depth values within +-half_band of z."""
+    v = depth_mm[depth_mm > 0].astype(float) / 1000.0
+    u = np.unique(v[np.abs(v - z_m) < half_band_m])
+    assert len(u) > 5
+    return float(np.mean(np.diff(u)))
+
+
+# ----------------------------------------------------------------------- structured light
+
+
+def test_disparity_quantisation_matches_the_real_camera(real_depth, structured):
+    """Depth takes only values 1/8 px of disparity apart: steps of 2.85e-3 z^2 m, as the real
+    frames show at 0.7, 0.9 and 1.2 m, and as the rendered table shows at its depth."""
+    for z in (0.7, 0.9, 1.2):
+        assert _step_sizes(real_depth[0], z) == pytest.approx(2.85e-3 * z * z, rel=0.12)
+    (r, frame), _ = structured
+    table = float(np.median(frame.depth[frame.depth > 0])) / 1000.0
+    assert 0.72 < table < 0.85
+    assert _step_sizes(frame.depth, table, 0.02) == pytest.approx(2.85e-3 * table**2, rel=0.12)
+    # The plain Kinect model writes every millimetre.
+    _, plain = structured[1]
+    assert _step_sizes(plain.depth, table, 0.02) == pytest.approx(0.001, abs=1e-4)
+
+
+def test_holes_and_invalid_border_like_the_real_frames(real_depth, structured):
+    (r, frame), (_, plain) = structured
+    real = np.mean([np.mean(d == 0) for d in real_depth])
+    rendered = float(np.mean(frame.depth == 0))
+    assert 0.10 < real < 0.13  # the README's 11.6 %
+    assert abs(rendered - real) < 0.03, (rendered, real)
+    assert np.mean(plain.depth == 0) < 0.05  # the plain model has few
+    # Registration leaves columns on the right and rows at the top without depth, on both.
+    for d in (*real_depth, frame.depth):
+        assert np.all(d[:, -realism.BORDER_RIGHT + 2:] == 0)
+        assert np.all(d[:realism.BORDER_TOP - 2] == 0)
+        assert np.mean(d[:, :3] == 0) > 0.6 and np.mean(d[:, 40:60] == 0) < 0.4
+    # Holes along the hand's outline: where the depth jumps from hand to table.
+    hand = (plain.depth > 0) & (plain.depth < 720)
+    ring = cv2.dilate(hand.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool) & ~cv2.erode(
+        hand.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    assert np.mean(frame.depth[ring] == 0) > 0.2
+
+
+def test_axial_noise_is_nguyens_and_spatially_correlated(structured):
+    (r, frame), _ = structured
+    d = frame.depth.astype(float) / 1000.0
+    patch = d[330:447, 60:195]  # table, away from the hand and the border
+    ok = patch > 0
+    yy, xx = np.nonzero(ok)
+    A = np.column_stack([xx, yy, np.ones_like(xx)]).astype(float)
+    res = np.full(patch.shape, np.nan)
+    res[ok] = patch[ok] - A @ np.linalg.lstsq(A, patch[ok], rcond=None)[0]
+    z0 = float(np.median(patch[ok]))
+    sigma = float(np.nanstd(res))
+    assert sigma == pytest.approx(depth_sigma_nguyen(z0), rel=0.25)
+    assert sigma > 1.5 * 1.425e-3 * z0**2 * 0.7  # well above the plain Kinect model
+    # Averaging 9x9 pixels would cut iid noise 9-fold; the matching window's correlation keeps
+    # most of it.
+    blocks = np.nanmean(res.reshape(13, 9, 15, 9), axis=(1, 3))
+    assert np.nanstd(blocks) / sigma > 0.4
+
+
+def test_depth_is_misregistered_by_one_to_two_pixels(structured):
+    (r, frame), (_, plain) = structured
+    a = ((plain.depth > 0) & (plain.depth < 720)).astype(float)
+    b = ((frame.depth > 0) & (frame.depth < 720)).astype(float)
+    scores = {(dx, dy): float(np.sum(np.roll(a, (dy, dx), (0, 1)) * b))
+              for dx in range(-3, 4) for dy in range(-3, 4)}
+    dx, dy = max(scores, key=scores.get)
+    assert 1 <= abs(dx) <= 2 and abs(dy) <= 1
+
+
+# ------------------------------------------------------------------------- the colour camera
+
+
+def _rim_centroids(R, t, layout, cam, offsets=None):
+    """Area centroids of the projected marker rims by cv2.projectPoints with the camera's own
+    distortion (the oracle)."""
+    phi = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    circle = MARKER_RADIUS * np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
+    rvec = cv2.Rodrigues(R)[0]
+    dist = np.array(cam.dist) if cam.dist is not None else None
+    pts = layout.points if offsets is None else layout.points + offsets
+    out = []
+    for p in pts:
+        uv = cv2.projectPoints(p + circle, rvec, t, cam.K, dist)[0][:, 0].astype(np.float32)
+        m = cv2.moments(uv)
+        out.append([m["m10"] / m["m00"], m["m01"] / m["m00"]])
+    return np.array(out)
+
+
+def _blue_centroid(bgr, uv, radius=8):
+    u0, v0 = int(round(uv[0])), int(round(uv[1]))
+    win = bgr[v0 - radius:v0 + radius + 1, u0 - radius:u0 + radius + 1].astype(np.float32)
+    w = np.clip(win[..., 0] - win[..., 2] - 40.0, 0, None)
+    m = cv2.moments(w)
+    return np.array([m["m10"] / m["m00"] + u0 - radius, m["m01"] / m["m00"] + v0 - radius])
+
+
+def test_lens_distortion_is_rendered_through_the_cameras_model():
+    sc = make_scene("reach", 0, n_frames=3, effects=["distortion"])
+    assert sc.camera.dist == realism.XTION_DIST
+    r, frame = _first(sc, k=2)  # the end of the reach: the hand off-centre
+    traj = sc.trajectory()
+    oracle = _rim_centroids(traj.R_ch[2], traj.t_ch[2], sc.layout, sc.camera)
+    undistorted = _rim_centroids(traj.R_ch[2], traj.t_ch[2], sc.layout, Camera.default())
+    moved = np.linalg.norm(oracle - undistorted, axis=1)
+    assert moved.max() > 0.35  # ~2 px at the corners; here, off-centre, a fraction of that
+    np.testing.assert_allclose(frame.uv, oracle, atol=0.02)
+    blobs = np.array([_blue_centroid(frame.bgr, uv) for uv in oracle])
+    to_oracle = np.linalg.norm(blobs - oracle, axis=1)
+    assert to_oracle.max() < 0.2
+    j = int(np.argmax(moved))
+    assert to_oracle[j] < 0.5 * np.linalg.norm(blobs[j] - undistorted[j])
+
+
+def test_bayer_round_trip_keeps_each_sites_channel_and_interpolates_bilinearly():
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (40, 60, 3)).astype(np.uint8), (0, 0), 1.5)
+    out = bayer_round_trip(img).astype(float)
+    f = img.astype(float)
+    np.testing.assert_array_equal(out[2:-2:2, 2:-2:2, 0], f[2:-2:2, 2:-2:2, 0])  # blue sites
+    np.testing.assert_array_equal(out[3:-2:2, 3:-2:2, 2], f[3:-2:2, 3:-2:2, 2])  # red sites
+    # At a blue site, green is the mean of its 4 neighbours, red of its 4 diagonals.
+    y, x = 10, 20
+    green = np.mean([f[y - 1, x, 1], f[y + 1, x, 1], f[y, x - 1, 1], f[y, x + 1, 1]])
+    red = np.mean([f[y - 1, x - 1, 2], f[y - 1, x + 1, 2], f[y + 1, x - 1, 2], f[y + 1, x + 1, 2]])
+    assert out[y, x, 1] == pytest.approx(green, abs=1.0)
+    assert out[y, x, 2] == pytest.approx(red, abs=1.0)
+
+
+@pytest.fixture(scope="module")
+def compressed():
+    sc = make_scene("deviation", 0, n_frames=3)
+    plain = _first(sc, k=1)[1]
+    return sc, plain
+
+
+def _psnr(a, b):
+    return 10 * np.log10(255.0**2 / np.mean((a.astype(float) - b.astype(float)) ** 2))
+
+
+def test_jpeg_and_h264_compress_the_frame_and_nothing_else(compressed):
+    sc, plain = compressed
+    jpeg = _first(with_effects(sc, ["jpeg"]), k=1)[1]
+    # The same frame, then OpenCV's JPEG at quality 80.
+    np.testing.assert_array_equal(jpeg.bgr, jpeg_round_trip(plain.bgr, realism.JPEG_QUALITY))
+    assert 30 < _psnr(jpeg.bgr, plain.bgr) < 45
+    np.testing.assert_array_equal(jpeg.depth, plain.depth)
+    pytest.importorskip("av", reason="the h264 effect needs PyAV: pip install 'wristtrack[video]'")
+    h264 = _first(with_effects(sc, ["h264"]), k=1)[1]
+    assert h264.bgr.shape == plain.bgr.shape and h264.bgr.dtype == np.uint8
+    assert 30 < _psnr(h264.bgr, plain.bgr) < 45
+    assert not np.array_equal(h264.bgr, jpeg.bgr)
+
+
+def test_auto_exposure_steps_and_white_balance_drift():
+    sc = make_scene("deviation", 0, n_frames=50, fps=5)  # ~10 s
+    fx = with_effects(sc, ["auto_exposure", "white_balance"])
+    ra, rb = Renderer(sc, 0), Renderer(fx, 0)
+    gain, blue_red = [], []
+    for t in sc.times[::2]:
+        a, b = ra.frame(float(t)).bgr, rb.frame(float(t)).bgr
+        pa = a[20:120, 20:160].reshape(-1, 3).mean(axis=0)  # static table, no hand
+        pb = b[20:120, 20:160].reshape(-1, 3).mean(axis=0)
+        gain.append(pb[1] / pa[1])
+        blue_red.append((pb[0] / pa[0]) / (pb[2] / pa[2]))
+    gain, blue_red = np.array(gain), np.array(blue_red)
+    assert gain.min() > 0.68 and gain.max() < 1.32
+    assert gain.max() / gain.min() > 1.1  # at least one real step over 10 s
+    assert np.max(np.abs(np.diff(gain))) > 0.05  # steps, not a crawl
+    assert np.ptp(blue_red) > 0.02 and np.all(np.abs(blue_red - 1) < 0.25)
+
+
+def test_long_shutter_streaks_markers_by_their_motion():
+    sc = make_scene("reach", 0)  # natural speed
+    long = with_effects(sc, ["shutter"])
+    assert long.exposure == pytest.approx(1 / 30)
+    j, e = 3, long.exposure  # MCP3
+
+    def image_path(t):
+        ends = []
+        for dt in (-e / 2, e / 2):
+            R, p = sc.motion.pose(np.array([t + dt]))
+            R_ch, t_ch = sc.R_c0 @ R[0], sc.R_c0 @ p[0] + sc.t_c0
+            ends.append(sc.camera.project(sc.layout.points[j] @ R_ch.T + t_ch))
+        return ends
+
+    # A frame where the marker's image moves 8-16 px during the long exposure.
+    k = next(i for i, t in enumerate(sc.times)
+             if 8 < np.linalg.norm(np.subtract(*image_path(t))) < 16)
+    t = float(sc.times[k])
+    ends = image_path(t)
+    streak = float(np.linalg.norm(ends[1] - ends[0]))
+    a = Renderer(sc, 0).frame(t)
+    b = Renderer(long, 0).frame(t)
+
+    def spread_along(bgr):
+        u0, v0 = np.round(a.uv[j]).astype(int)
+        r = 14
+        win = bgr[v0 - r:v0 + r + 1, u0 - r:u0 + r + 1].astype(np.float32)
+        base = np.percentile(win[..., 0] - win[..., 2], 30)  # the skin around
+        w = np.clip(win[..., 0] - win[..., 2] - base - 6.0, 0, None)
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        w[xx**2 + yy**2 > r * r] = 0
+        m = cv2.moments(w)
+        d = (ends[1] - ends[0]) / streak
+        return (m["mu20"] * d[0] ** 2 + 2 * m["mu11"] * d[0] * d[1] + m["mu02"] * d[1] ** 2) / m[
+            "m00"]
+
+    # A uniform streak of length L adds L^2/12 to the variance along the motion; the plain
+    # scenario's 8 ms shutter already streaks it by L * 0.008 / e.
+    added = spread_along(b.bgr) - spread_along(a.bgr)
+    expected = streak * np.sqrt(1.0 - (sc.exposure / e) ** 2)
+    assert np.sqrt(12 * added) == pytest.approx(expected, rel=0.3)
+
+
+def test_specular_highlight_sits_where_the_dome_mirrors_the_lamp():
+    sc = custom_scene("still", still(1.0), np.array([0.0, 0.1]))
+    spec = with_effects(sc, ["specular"])
+    _, plain = _first(sc)
+    _, frame = _first(spec)
+    traj = sc.trajectory()
+    R, t = traj.R_ch[0], traj.t_ch[0]
+    n = R[:, 2]
+    found = 0
+    for j in range(6):
+        c = sc.layout.points[j] @ R.T + t
+        # Brute force over the dome: the point whose surface normal mirrors the lamp into the
+        # camera best (reflection of -LIGHT about the normal closest to the view ray).
+        best, where = -2.0, None
+        for a in np.linspace(-0.4, 0.4, 81):
+            for b in np.linspace(-0.4, 0.4, 81):
+                e1 = R[:, 0] * a + R[:, 1] * b
+                normal = n + e1
+                normal /= np.linalg.norm(normal)
+                p = c + realism.DOME_RADIUS * (normal - n)  # on the cap (tangent offset)
+                view = -p / np.linalg.norm(p)
+                refl = 2 * (normal @ LIGHT) * normal - LIGHT
+                if refl @ view > best:
+                    best, where = refl @ view, p
+        if np.linalg.norm(where - c) > MARKER_RADIUS:
+            continue  # the highlight falls off this marker
+        found += 1
+        uv = sc.camera.project(where)
+        diff = frame.bgr.astype(float).sum(axis=2) - plain.bgr.astype(float).sum(axis=2)
+        u0, v0 = int(round(uv[0])), int(round(uv[1]))
+        win = diff[v0 - 6:v0 + 7, u0 - 6:u0 + 7]
+        peak = np.array(np.unravel_index(np.argmax(win), win.shape))[::-1] + [u0 - 6, v0 - 6]
+        assert win.max() > 300  # near-white on a blue marker
+        assert np.linalg.norm(peak - uv) <= 1.5
+        np.testing.assert_allclose(frame.uv[j], plain.uv[j])  # the truth is the rim's
+    assert found >= 3
+
+
+# ------------------------------------------------------------------------------- the hand
+
+
+def test_arched_layout_is_three_dimensional_and_rendered_on_the_skin(tmp_path):
+    sc = make_scene("deviation", 0, n_frames=2, effects=["nonplanar"])
+    lay = sc.layout
+    lay.validate()
+    assert lay.points[3, 1] == 0 and lay.points[3, 2] == 0  # MCP3 on +X: the contract's frame
+    assert np.ptp(lay.points[:, 2]) > 0.004  # the thumb base well below the knuckles
+    assert lay.points[1, 2] < -0.003
+    r, frame = _first(sc)
+    traj = sc.trajectory()
+    oracle = _rim_centroids(traj.R_ch[0], traj.t_ch[0], lay, sc.camera)
+    np.testing.assert_allclose(frame.uv, oracle, atol=0.02)
+    blobs = np.array([_blue_centroid(frame.bgr, uv) for uv in oracle])
+    assert np.max(np.linalg.norm(blobs - oracle, axis=1)) < 0.3
+    # Depth at the markers is their own (they lie on the palm's arched top).
+    z_true = (lay.points @ traj.R_ch[0].T + traj.t_ch[0])[:, 2]
+    for j, uv in enumerate(oracle):
+        u, v = np.round(uv).astype(int)
+        d = frame.depth[v - 1:v + 2, u - 1:u + 2].astype(float) / 1000
+        assert np.median(d[d > 0]) == pytest.approx(z_true[j], abs=0.002)
+
+
+def test_soft_tissue_moves_only_the_mcp_markers_with_finger_flexion():
+    sc = make_scene("deviation", 0, n_frames=12, fps=5, effects=["soft_tissue"])
+    traj = sc.trajectory()
+    r = Renderer(sc, 0)
+    shifts = []
+    for k in (0, 4, 8):
+        t = float(sc.times[k])
+        frame = r.frame(t)
+        rigid = _rim_centroids(traj.R_ch[k], traj.t_ch[k], sc.layout, sc.camera)
+        flex = 0.5 * realism.FINGER_FLEXION_MAX_DEG * (
+            1 - np.cos(2 * np.pi * (t - sc.times[0]) / realism.FINGER_FLEXION_PERIOD_S))
+        slide = np.zeros((6, 3))
+        slide[2:] = [0.003 * flex / 90, 0.0, -0.001 * flex / 90]  # the stated 3 mm / 1 mm at 90
+        moved = _rim_centroids(traj.R_ch[k], traj.t_ch[k], sc.layout, sc.camera, slide)
+        np.testing.assert_allclose(frame.uv, moved, atol=0.02)
+        shifts.append(np.linalg.norm(frame.uv - rigid, axis=1))
+    shifts = np.array(shifts)
+    assert np.all(shifts[:, :2] < 0.02)  # WRIST and CMC1 do not slide
+    assert shifts[:, 2:].max() > 1.0  # the knuckles' skin does: ~2 mm, px at 0.65 m
+
+
+def test_left_hand_is_mirrored_and_says_so(tmp_path):
+    out = tmp_path / "left"
+    assert main(["simulate", str(out), "--hand-side", "left", "--nonplanar", "--n-frames", "2",
+                 "--scenario", "pronation"]) == 0
+    lay = HandLayout.load(out / "hand.json")
+    assert lay.side == "left" and lay.points[1, 1] < 0
+    np.testing.assert_allclose(lay.points, realism.arched(HandLayout.default().mirrored()).points)
+    truth = read_poses(out / "truth.csv")
+    assert len(truth["timestamp"]) == 2
+    rows = np.genfromtxt(out / "truth_markers.csv", delimiter=",", names=True)
+    cam = Camera.load(out / "camera.json")
+    # CMC1 is seen on the other side of the WRIST -> MCP3 line than on a right hand.
+    uv = {n: np.array([rows[f"{n}_u"][0], rows[f"{n}_v"][0]]) for n in MARKER_NAMES}
+    ax = uv["MCP3"] - uv["WRIST"]
+    side = ax[0] * (uv["CMC1"] - uv["WRIST"])[1] - ax[1] * (uv["CMC1"] - uv["WRIST"])[0]
+    right = make_scene("pronation", 0, n_frames=2)
+    ruv = _first(right)[1].uv
+    rax, rc = ruv[3] - ruv[0], ruv[1] - ruv[0]
+    assert np.sign(side) == -np.sign(rax[0] * rc[1] - rax[1] * rc[0])
+    assert cam == Camera.default()
+
+
+def test_preset_real_through_the_cli_and_bad_effects(tmp_path, capsys):
+    out = tmp_path / "real"
+    assert main(["simulate", str(out), "--preset", "real", "--n-frames", "2"]) == 0
+    assert "structured_light" in capsys.readouterr().out
+    assert Camera.load(out / "camera.json").dist == realism.XTION_DIST
+    assert np.ptp(HandLayout.load(out / "hand.json").points[:, 2]) > 0.004
+    assert set(realism.PRESET_REAL) == set(realism.EFFECTS) - {"h264", "left_hand"}
+    with pytest.raises(ConfigError, match="unknown simulator effect.*sparkle"):
+        make_scene("deviation", effects=["sparkle"])
+    with pytest.raises(ConfigError, match="hand side"):
+        make_scene("deviation", hand_side="both")
+    with pytest.raises(SystemExit):  # argparse: one line naming the choices, exit 2
+        main(["simulate", str(tmp_path / "x"), "--hand-side", "middle"])
