@@ -304,10 +304,9 @@ def matrix_from_quat(q: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------- single quaternions, in place
-# One rotation at a time, for the compiled tracker step: plain loops and arithmetic on float64
-# arrays, results written into ``out``, so that numba compiles these very functions
-# (tracking/compiled.py) and the Python interpreter runs them as they are. Hamilton convention,
-# (w, x, y, z), R(p q) = R(p) R(q); no sign canonicalisation (the filter composes them).
+# One rotation at a time in plain arithmetic, results written into ``out``: numba compiles these
+# very functions into the tracker step (tracking/compiled.py). Hamilton convention, (w, x, y, z),
+# R(p q) = R(p) R(q); no sign canonicalisation (the filter composes them).
 
 
 def quat_exp_into(x: float, y: float, z: float, out: np.ndarray) -> None:

@@ -239,3 +239,22 @@ def test_the_cache_key_changes_with_the_code_compiled_into_the_step():
     digest = compiled._code_digest
     assert digest([a]) == digest([a_again]) != digest([b])
     assert digest([a, b]) != digest([b, a])
+
+
+def test_a_pickled_tracker_comes_back_with_its_compiled_step(step):
+    import pickle
+
+    rng = np.random.default_rng(5)
+    truth, camera, layout = scenario("pronation", rng=rng)
+    frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
+    tracker = Tracker(camera, layout, TrackerConfig())
+    for f in frames[:20]:
+        tracker.step(f.detections)
+    assert tracker._compiled is not None
+    restored = pickle.loads(pickle.dumps(tracker))
+    a = [tracker.step(f.detections) for f in frames[20:40]]
+    b = [restored.step(f.detections) for f in frames[20:40]]
+    assert restored._compiled is not None and restored._compiled[0] is step
+    for ra, rb in zip(a, b, strict=True):
+        np.testing.assert_array_equal(ra.x, rb.x)
+        np.testing.assert_array_equal(ra.labels, rb.labels)

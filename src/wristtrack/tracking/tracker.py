@@ -118,6 +118,14 @@ class Tracker:
         self.last_init_error: str | None = None
         self.max_blobs_seen = 0  # most blobs in a frame offered for initialisation
 
+    def __getstate__(self) -> dict:
+        """Pickled without the compiled step: a numba function whose helpers are compiled only
+        in the process that loaded it. It holds no state between frames; the restored tracker
+        loads it again on its next frame."""
+        state = self.__dict__.copy()
+        state["_compiled"] = state["_compiled_usable"] = None
+        return state
+
     # ------------------------------------------------------------------------------- stepping
 
     def step(self, det: Detections, labels: np.ndarray | None = None) -> FrameResult:
