@@ -95,6 +95,10 @@ def cluster_shape(xyz: np.ndarray) -> np.ndarray:
     if not full.any():
         raise InputError("no frame sees every cluster marker; cannot learn the cluster's shape")
     shape = xyz[np.flatnonzero(full)[0]]
+    spread = np.linalg.svd(shape - shape.mean(axis=0), compute_uv=False)
+    if not spread[1] > 1e-3 * spread[0]:
+        raise InputError("the cluster's markers lie in a line: its rotation about that line is "
+                         "unknown; give three markers that span a triangle")
     for _ in range(2):
         R, t, _ = rigid_fit(shape, xyz[full])
         local = np.einsum("nji,nkj->nki", R, xyz[full] - t[:, None])  # R^T (x - t)

@@ -1,0 +1,205 @@
+"""``wristtrack compare`` on synthetic data with planted values (no rendering): a run folder
+built from a scripted motion's exact poses, and a reference that saw the same motion in its
+own lab frame, at its own rate, on its own clock."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from wristtrack.analysis.compare import compare
+from wristtrack.cli import main
+from wristtrack.errors import InputError
+from wristtrack.geometry import rotation_distance
+from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.io.markers.trajectories import MarkerTrajectories
+from wristtrack.io.markers.trc import write_trc
+from wristtrack.io.poses import read_poses, write_truth
+from wristtrack.sim.motion import Trajectory, sample, scenario_motion, timestamps
+
+pytest.importorskip("pingouin")
+
+R_LC = Rotation.from_euler("xyz", [20.0, -150.0, 40.0], degrees=True).as_matrix()
+T_LC = np.array([0.8, 1.2, 0.9])
+OFFSET, RATIO, RATE = 0.731, 1.0003, 120.0
+CLUSTER = np.array([[0.03, 0.02, 0.015], [0.07, 0.01, 0.02], [0.05, -0.025, 0.018]])  # hand
+
+
+def _run(folder, traj: Trajectory, layout: HandLayout, noise=None):
+    folder.mkdir()
+    if noise is not None:
+        traj = noise(traj)
+    write_truth(folder / "poses.csv", traj)
+    summary = {"range_of_motion": {}, "hand_layout": layout.to_dict(),
+               "conventions": {"side": "right"}}
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder
+
+
+def _reference(path, motion, R_c0, t_c0, layout, duration, noise_mm=0.0, seed=0):
+    tau = np.arange(0.0, OFFSET + RATIO * duration + 0.4, 1.0 / RATE)
+    t_cam = np.clip((tau - OFFSET) / RATIO, 0.0, motion.duration)
+    R_rel, p_rel = motion.pose(t_cam)
+    R_ch, t_ch = R_c0 @ R_rel, p_rel @ R_c0.T + t_c0
+    pts = np.concatenate([CLUSTER, layout.points])
+    lab = (np.einsum("nij,kj->nki", R_ch, pts) + t_ch[:, None]) @ R_LC.T + T_LC
+    lab += np.random.default_rng(seed).normal(0, noise_mm * 1e-3, lab.shape)
+    names = ("C1", "C2", "C3", *(f"Subj:{n}" for n in MARKER_NAMES))
+    write_trc(path, MarkerTrajectories(names, np.arange(len(tau)), tau, lab, RATE, False, "t"),
+              "mm")
+    return path
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """(run folder, reference TRC, truth trajectory) of the 'mix' motion (every axis and a
+    reach) at 30 fps; the reference noise-free."""
+    root = tmp_path_factory.mktemp("compare")
+    motion, (R_c0, t_c0) = scenario_motion("mix")
+    traj = sample(motion, timestamps(int(motion.duration * 30) + 1, 30.0), R_c0, t_c0)
+    layout = HandLayout.default()
+    run = _run(root / "run", traj, layout)
+    ref = _reference(root / "ref.trc", motion, R_c0, t_c0, layout, traj.t[-1])
+    return run, ref, traj
+
+
+MAP = ",".join(f"{n}={n}" for n in MARKER_NAMES)
+
+
+def _transform_errors(result):
+    R = np.array(result["registration"]["rotation"])
+    t = np.array(result["registration"]["translation"])
+    c = np.array(result["registration"]["hand_centre_cam_m"])
+    ang = float(np.degrees(rotation_distance(R, R_LC)))
+    return ang, float(np.linalg.norm((R - R_LC) @ c + t - T_LC) * 1e3)
+
+
+@pytest.mark.parametrize("mode", ["markers", "cluster"])
+def test_exact_poses_recover_the_planted_clock_and_transform(scene, mode):
+    run, ref, _ = scene
+    kw = {"markers": MAP} if mode == "markers" else {"cluster": "C1,C2,C3"}
+    r = compare(run, ref, **kw).result
+    assert abs(r["time_offset_s"] - OFFSET) < 2e-4
+    assert abs(r["clock_ratio"] - RATIO) < 2e-5
+    ang, mm = _transform_errors(r)
+    assert ang < 0.01 and mm < 0.05
+    assert r["pos_rmse_mm"] < 0.05 and r["rot_rmse_deg"] < 0.02
+    for axis in ("deviation", "flexion", "pronation"):
+        assert abs(r["bland_altman"][axis]["bias_deg"]) < 0.02
+        assert abs(r["rom_error_deg"][axis]) < 0.05
+        assert r["icc"][axis] > 0.9999
+    if mode == "cluster":  # the cluster's fixed offset in our hand frame is found too
+        X_R = np.array(r["cluster_offset"]["rotation"])
+        x_t = np.array(r["cluster_offset"]["translation"])
+        # p_cluster = X_R p_hand + x_t, the cluster frame's origin at C1: each cluster marker
+        # lands at its distance from C1, C1 itself at the origin.
+        for k in range(3):
+            assert np.linalg.norm(X_R @ CLUSTER[k] + x_t) == pytest.approx(
+                np.linalg.norm(CLUSTER[k] - CLUSTER[0]), abs=5e-5)
+    assert r["reaches"]["paired"] >= 1
+    pair = r["reaches"]["pairs"][0]
+    assert pair["peak_speed_m_s"][0] == pytest.approx(pair["peak_speed_m_s"][1], rel=0.01)
+
+
+def test_angle_statistics_see_a_planted_bias(scene, tmp_path):
+    run, ref, _ = scene
+    biased = tmp_path / "biased"
+    biased.mkdir()
+    cols = read_poses(run / "poses.csv")
+    text = (run / "poses.csv").read_text().splitlines()
+    header = text[0].split(",")
+    j = header.index("flexion_deg")
+    rows = [line.split(",") for line in text[1:]]
+    for row, value in zip(rows, cols["flexion_deg"], strict=True):
+        row[j] = repr(float(value) + 2.5)  # our flexion reads 2.5 deg high: a calibration bias
+    (biased / "poses.csv").write_text("\n".join([text[0], *map(",".join, rows)]) + "\n")
+    (biased / "summary.json").write_text((run / "summary.json").read_text())
+    r = compare(biased, ref, markers=MAP).result
+    ba = r["bland_altman"]["flexion"]
+    assert ba["bias_deg"] == pytest.approx(2.5, abs=0.02)
+    assert ba["loa_high_deg"] - ba["loa_low_deg"] < 0.1
+    assert r["rom_error_deg"]["flexion"] == pytest.approx(0.0, abs=0.05)
+    assert r["icc"]["flexion"] < r["icc"]["deviation"]  # absolute agreement sees the bias
+
+
+def test_noisy_tracking_error_is_inside_the_reported_uncertainty(tmp_path):
+    """Tracker-like noise (0.5 mm, 0.4 deg, correlated over frames) on our poses and 0.1 mm
+    marker noise on the reference: the planted values lie within 3 reported sigma."""
+    motion, (R_c0, t_c0) = scenario_motion("mix")
+    traj = sample(motion, timestamps(int(motion.duration * 30) + 1, 30.0), R_c0, t_c0)
+    rng = np.random.default_rng(5)
+
+    def smooth_noise(n, sd):
+        x = rng.normal(0, 1, (n + 4, 3))
+        x = (x[:-4] + x[1:-3] + x[2:-2] + x[3:-1] + x[4:]) / np.sqrt(5)
+        return x * sd
+
+    def noisy(tr: Trajectory) -> Trajectory:
+        n = len(tr.t)
+        dR = Rotation.from_rotvec(smooth_noise(n, np.radians(0.4))).as_matrix()
+        return Trajectory(tr.t, tr.R_ch @ dR, tr.t_ch + smooth_noise(n, 5e-4), tr.R_rel, tr.p_rel,
+                          tr.v, tr.w, tr.angles)
+
+    layout = HandLayout.default()
+    run = _run(tmp_path / "run", traj, layout, noisy)
+    ref = _reference(tmp_path / "ref.trc", motion, R_c0, t_c0, layout, traj.t[-1], 0.1)
+    r = compare(run, ref, markers=MAP).result
+    sig = r["registration"]["sigma"]
+    assert abs(r["time_offset_s"] - OFFSET) < 3 * r["time_offset_sigma_s"] + 1e-4
+    assert abs(r["clock_ratio"] - RATIO) < 3 * r["clock_ratio_sigma"] + 1e-6
+    ang, mm = _transform_errors(r)
+    assert ang < 3 * sig["rotation_deg"] + 0.005 and mm < 3 * sig["translation_at_hand_mm"] + 0.02
+    assert r["pos_rmse_mm"] == pytest.approx(np.sqrt(3) * 0.5, rel=0.15)
+
+
+def test_cli_writes_the_contract_keys_and_a_self_contained_page(scene, tmp_path, capsys):
+    run, ref, _ = scene
+    out = tmp_path / "cmp"
+    assert main(["compare", str(run), str(ref), "--markers", MAP, "--out", str(out)]) == 0
+    assert "time offset" in capsys.readouterr().out
+    r = json.loads((out / "comparison.json").read_text())
+    for key in ("time_offset_s", "clock_ratio", "frames_compared", "pos_rmse_mm",
+                "rot_rmse_deg", "rom_error_deg", "bland_altman", "icc", "registration"):
+        assert key in r
+    for axis in ("deviation", "flexion", "pronation"):
+        assert set(r["bland_altman"][axis]) >= {"bias_deg", "loa_low_deg", "loa_high_deg"}
+        assert isinstance(r["icc"][axis], float) and axis in r["rom_error_deg"]
+    assert np.array(r["registration"]["rotation"]).shape == (3, 3)
+    assert len(r["registration"]["translation"]) == 3
+    page = (out / "comparison.html").read_text()
+    assert page.count("data:image/png;base64,") == 4
+    assert "http://" not in page and "https://" not in page and "<link" not in page
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--cluster", "C1,C2"], "three or more"),
+    (["--cluster", "C1,C2,NOPE"], "no marker 'NOPE'"),
+    (["--markers", "THUMB=C1"], "'THUMB' is not one of our markers"),
+    (["--markers", "MCP2=MCP2"], "fewer than three markers and not WRIST"),
+    ([], "--cluster A,B,C .* or --markers"),
+])
+def test_bad_mappings_give_one_line_and_exit_2(scene, tmp_path, capsys, args, message):
+    run, ref, _ = scene
+    assert main(["compare", str(run), str(ref), "--out", str(tmp_path / "x"), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    import re
+
+    assert re.search(message, err)
+
+
+def test_a_still_reference_cannot_be_aligned(scene, tmp_path):
+    run, _, traj = scene
+    n = 300
+    still = np.tile(np.random.default_rng(0).normal(0, 0.1, (1, 9, 3)), (n, 1, 1))
+    still[:, 3:6] = np.linspace(0.1, 0.5, 3)[:, None]  # markers 4-6 in a line
+    names = ("C1", "C2", "C3", "L1", "L2", "L3", *MARKER_NAMES[:3])
+    write_trc(tmp_path / "still.trc", MarkerTrajectories(
+        names, np.arange(n), np.arange(n) / 100.0, still, 100.0, False, "t"), "mm")
+    with pytest.raises(InputError, match="shows no movement"):
+        compare(run, tmp_path / "still.trc", cluster="C1,C2,C3")
+    with pytest.raises(InputError, match="lie in a line"):
+        compare(run, tmp_path / "still.trc", cluster="L1,L2,L3")
