@@ -3,7 +3,6 @@ exactly the result of a run that was never interrupted."""
 
 import importlib.util
 import json
-import os
 import shutil
 import signal
 import subprocess
@@ -18,7 +17,7 @@ from wristtrack.cli import main
 from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
 from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
-from wristtrack.pipeline.track import TEST_SLEEP_ENV, track_recording
+from wristtrack.pipeline.track import track_recording
 
 N_FRAMES = 48
 
@@ -95,21 +94,27 @@ def test_interrupted_smoothed_run_resumes_to_the_same_smoothed_result(rec, tmp_p
             assert (part / name).read_bytes() == (full / name).read_bytes(), name
 
 
-def _start(rec, out, sleep=0.04):
-    env = {**os.environ, TEST_SLEEP_ENV: str(sleep)}
+def _start(rec, out):
     cmd = [sys.executable, "-m", "wristtrack.cli", "track", str(rec), "--out", str(out),
            "--no-progress", "--no-report", "--checkpoint-every", "4"]
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.send_signal(signal.SIGSTOP)  # it runs only in the bursts _run_until_rows allows
+    return proc
 
 
-def _wait_for_rows(proc, path, rows, timeout=180.0):
+def _run_until_rows(proc, path, rows, timeout=180.0):
+    """Let the stopped run go on in short bursts (SIGCONT, a few ms, SIGSTOP) until poses.csv
+    holds more than ``rows`` rows; it is left stopped. A burst is far shorter than the rest of
+    the run, so the run is caught part-way however fast or busy the machine is."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
+        started = path.exists()
+        proc.send_signal(signal.SIGCONT)
+        time.sleep(0.003 if started else 0.05)  # start-up (imports, compiling) in long bursts
+        proc.send_signal(signal.SIGSTOP)
         assert proc.poll() is None, "the run ended before it could be interrupted"
-        if path.exists() and path.read_bytes().count(b"\n") > rows:
+        if started and path.read_bytes().count(b"\n") > rows:
             return
-        time.sleep(0.01)
     raise AssertionError("no rows appeared")
 
 
@@ -134,8 +139,9 @@ def test_killed_cli_run_keeps_a_valid_poses_csv_and_resumes(rec, reference, tmp_
                                                              check_run):
     out = tmp_path / "run"
     proc = _start(rec, out)
-    _wait_for_rows(proc, out / "poses.csv", 12)
-    proc.send_signal(sig)
+    _run_until_rows(proc, out / "poses.csv", 12)
+    proc.send_signal(sig)  # a real signal, wherever the run happens to be in its frame
+    proc.send_signal(signal.SIGCONT)
     _, err = proc.communicate(timeout=180)
     kept = _data_lines(out / "poses.csv")
     assert 12 <= len(kept) < N_FRAMES

@@ -231,9 +231,7 @@ def test_report_command_regenerates_and_reports_bad_folders(run, tmp_path, capsy
 
 
 def _frame_result(i: int, status: Status, n_clutter: int = 0) -> FrameResult:
-    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
-    return FrameResult(i, i / 30, status, nan33, nan3, nan33, nan3, nan3, nan3, None,
-                       np.full(n_clutter, -1), 0, n_clutter)
+    return FrameResult.empty(i, i / 30, status, labels=n_clutter)
 
 
 def test_run_without_any_estimate_gives_a_report_saying_so(tmp_path):
@@ -407,8 +405,9 @@ def test_overlay_writer_draws_blobs_clutter_and_axes(tmp_path):
                                                                           -math.cos(a)])
     R = np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])
     t = np.array([0.0, 0.0, 0.5])
-    result = FrameResult(0, 0.0, Status.TRACKING, R, t, np.eye(3), np.zeros(3), np.zeros(3),
-                         np.zeros(3), None, np.array([3, -1]), 1, 1)
+    result = FrameResult(frame=0, timestamp=0.0, status=Status.TRACKING, R_ch=R, t_ch=t,
+                         R=np.eye(3), p=np.zeros(3), v=np.zeros(3), w=np.zeros(3), cov=None,
+                         labels=np.array([3, -1]), n_visible=1, n_clutter=1)
     det = Detections(0.0, np.array([[150.0, 120.0], [500.0, 400.0]]))
     grey = np.full((480, 640, 3), 128, np.uint8)
     with OverlayWriter(tmp_path / "o.mp4", camera, None, fps=10) as ov:

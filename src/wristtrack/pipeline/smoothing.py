@@ -28,8 +28,6 @@ from wristtrack.tracking.tracker import FrameResult, Status
 
 FILTERED_POSES = "poses_filtered.csv"
 _STATUSES = {s.value: s for s in Status}
-_NAN3 = np.full(3, np.nan)
-_NAN33 = np.full((3, 3), np.nan)
 
 _DEFAULT_PARAMS = UKFParams()
 
@@ -107,18 +105,19 @@ def _filtered_result(row, col, states, k, model, R_c0, t_c0, side) -> FrameResul
     nis, dof = number("nis"), number("nis_dof")
     timestamp = float(row[col["timestamp"]])
     if states.track_id[k] < 0:
-        return FrameResult(
-            int(row[col["frame"]]), timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3,
-            _NAN3, None, np.empty(0, int), n_visible, n_clutter, nis,
-            0 if math.isnan(dof) else int(dof), side=side,
+        return FrameResult.empty(
+            int(row[col["frame"]]), timestamp, status, labels=np.empty(0, int),
+            n_visible=n_visible, n_clutter=n_clutter, nis=nis,
+            nis_dof=0 if math.isnan(dof) else int(dof), side=side,
         )
     x = states.x[k]
     R_all, p_all = model.pose(x[None])
     R, p = R_all[0], p_all[0]
     v, w = model.velocities(x)
     return FrameResult(
-        int(row[col["frame"]]), timestamp, status, R_c0 @ R, R_c0 @ p + t_c0, R, p,
-        np.asarray(v), np.asarray(w), states.P[k], np.empty(0, int), n_visible, n_clutter, nis,
-        0 if math.isnan(dof) else int(dof), number("pos_sigma_mm"), number("rot_sigma_deg"),
-        x, int(states.track_id[k]), side,
+        frame=int(row[col["frame"]]), timestamp=timestamp, status=status, R_ch=R_c0 @ R,
+        t_ch=R_c0 @ p + t_c0, R=R, p=p, v=np.asarray(v), w=np.asarray(w), cov=states.P[k],
+        labels=np.empty(0, int), n_visible=n_visible, n_clutter=n_clutter, nis=nis,
+        nis_dof=0 if math.isnan(dof) else int(dof), pos_sigma_mm=number("pos_sigma_mm"),
+        rot_sigma_deg=number("rot_sigma_deg"), x=x, track_id=int(states.track_id[k]), side=side,
     )

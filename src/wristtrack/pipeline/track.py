@@ -8,10 +8,9 @@ done: an interrupted run keeps what it computed.
 from __future__ import annotations
 
 import math
-import os
 import sys
-import time
-from dataclasses import asdict, replace
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +21,7 @@ from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.io.atomic import write_json_atomic
-from wristtrack.io.base import Recording
+from wristtrack.io.base import Frame, Recording
 from wristtrack.io.poses import PosesWriter, pose_row
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
@@ -35,8 +34,6 @@ if TYPE_CHECKING:
 
 _NAN3 = np.full(3, np.nan)
 _NAN33 = np.full((3, 3), np.nan)
-# Test hook only: seconds to sleep per frame, so a test can kill a run part-way on purpose.
-TEST_SLEEP_ENV = "WRISTTRACK_TEST_SLEEP"
 
 
 def track_recording(
@@ -66,6 +63,48 @@ def track_recording(
     ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
     run in ``out`` from its checkpoint, with the same result as an uninterrupted run.
     """
+    out = _output_folder(out)
+    config = config or TrackerConfig()
+    settings = {**_settings(config), "smoothed": bool(smooth)}
+    manual_labels = None if labels is None else (
+        labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
+    )
+    fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
+    checkpoints = ckpt.Checkpointer(out, fingerprint, checkpoint_every)
+    run, start = _open_run(recording, out, config, fingerprint, resume)
+    bar = _progress(recording, progress)
+    bar.update(start)
+    states = _state_writer(out, run.tracker, resume) if smooth else _NoStates()
+    files = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
+    with PosesWriter(out / "poses.csv", append=resume) as writer, states:
+        rows = _Rows(writer, states, overlay, bar)
+        try:
+            interrupted = _frame_loop(recording.frames(start), run, labels, rows, checkpoints,
+                                      files)
+        finally:
+            bar.close()
+    return _finish(recording, out, run, config, settings, smooth, interrupted, checkpoints)
+
+
+# ------------------------------------------------------------------------------ opening
+
+
+@dataclass
+class _RunState:
+    """What a run carries from one frame to the next: exactly what a checkpoint saves."""
+
+    detector: MarkerDetector
+    tracker: Tracker
+    summary: SummaryAccumulator
+    learned: bool = False  # the detector's colours were refined at the first fix
+    bad_frames: list[dict[str, Any]] = field(default_factory=list)  # for summary.json
+
+    def saved(self) -> dict[str, Any]:
+        return {"detector": self.detector, "tracker": self.tracker, "summary": self.summary,
+                "learned": self.learned, "bad_frames": self.bad_frames}
+
+
+def _output_folder(out: str | Path) -> Path:
     out = Path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -74,103 +113,136 @@ def track_recording(
             f"cannot create the output folder {out} ({e.strerror}); give --out a folder you can "
             "write to"
         ) from None
-    config = config or TrackerConfig()
-    camera = recording.camera
-    settings = {**_settings(config), "smoothed": bool(smooth)}
-    manual_labels = None if labels is None else (
-        labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
-    )
-    fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
-    checkpoints = ckpt.Checkpointer(out, fingerprint, checkpoint_every)
-    start = 0
-    if resume:
-        saved = ckpt.load_checkpoint(out, fingerprint)
-        ckpt.truncate_outputs(out, saved)  # rows written after the checkpoint are redone
-        start = saved.next_index
-        detector, tracker, summary = (saved.state[k] for k in ("detector", "tracker", "summary"))
-        learned, bad_frames = saved.state["learned"], saved.state["bad_frames"]
-    else:
+    return out
+
+
+def _open_run(
+    recording: Recording,
+    out: Path,
+    config: TrackerConfig,
+    fingerprint: dict[str, Any] | None,
+    resume: bool,
+) -> tuple[_RunState, int]:
+    """The state to start from and the index of the first frame: a fresh run (a previous
+    run's checkpoint and summary removed), or the checkpoint's, with the output files cut back
+    to it (rows written after the checkpoint are redone)."""
+    if not resume:
         ckpt.clear_stale(out)
-        detector = MarkerDetector(camera)
-        tracker = Tracker(camera, recording.hand, config)
-        summary = SummaryAccumulator()
-        learned = False
-        bad_frames: list[dict[str, Any]] = []
-    interrupted = False
-    pause = float(os.environ.get(TEST_SLEEP_ENV) or 0)
-    bar = _progress(recording, progress)
-    bar.update(start)
-    states = _state_writer(out, tracker, resume) if smooth else _NoStates()
-    outputs = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
-    with PosesWriter(out / "poses.csv", append=resume) as writer, states, \
-            DeferredInterrupt() as stop:
+        tracker = Tracker(recording.camera, recording.hand, config)
+        return _RunState(MarkerDetector(recording.camera), tracker, SummaryAccumulator()), 0
+    saved = ckpt.load_checkpoint(out, fingerprint)
+    ckpt.truncate_outputs(out, saved)
+    return _RunState(**saved.state), saved.next_index
+
+
+# ---------------------------------------------------------------------------- frame loop
+
+
+@dataclass
+class _Rows:
+    """Where each frame's outcome goes: its poses.csv row, its filter state (for --smooth),
+    the overlay video, the progress bar."""
+
+    writer: PosesWriter
+    states: StateWriter | _NoStates
+    overlay: Any
+    bar: Any
+
+    def skipped(self, index: int, timestamp: float, n_blobs: int, status: str) -> None:
+        self.writer.write(_skipped_row(index, timestamp, n_blobs, status))
+        self.states.write(index, timestamp, None)
+
+    def tracked(self, index: int, timestamp: float, result: FrameResult) -> None:
+        self.writer.write_result(result)
+        self.states.write(index, timestamp, result)
+
+
+def _frame_loop(
+    frames: Iterator[Frame],
+    run: _RunState,
+    labels: Any,
+    rows: _Rows,
+    checkpoints: ckpt.Checkpointer,
+    files: list[Path],
+) -> bool:
+    """Track ``frames`` one by one; True if the run was interrupted (Ctrl-C, SIGTERM)."""
+    with DeferredInterrupt() as stop:
         try:
-            for frame in recording.frames(start):
+            for frame in frames:
                 # Between two frames every object is consistent: the moment to checkpoint.
                 if stop.requested or checkpoints.due(frame.index):
-                    states.flush()  # poses.csv is flushed row by row
-                    checkpoints.save(frame.index, outputs, {
-                        "detector": detector, "tracker": tracker, "summary": summary,
-                        "learned": learned, "bad_frames": bad_frames,
-                    })
+                    rows.states.flush()  # poses.csv is flushed row by row
+                    checkpoints.save(frame.index, files, run.saved())
                     if stop.requested:
-                        interrupted = True
-                        break
-                if pause:
-                    time.sleep(pause)
-                if frame.error is not None:  # unreadable frame: note it, go on with the next
-                    _note_bad(bar, bad_frames, frame.index, frame.error)
-                    writer.write(_skipped_row(frame.index, frame.timestamp, 0, "bad_frame"))
-                    states.write(frame.index, frame.timestamp, None)
-                    bar.update(1)
-                    continue
-                det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
-                manual = _frame_labels(labels, frame.index, det) if not learned else None
-                try:
-                    result = tracker.step(det, manual)
-                except InputError as exc:  # e.g. a timestamp that goes backwards: skip the frame
-                    _note_bad(bar, bad_frames, frame.index, str(exc))
-                    writer.write(_skipped_row(frame.index, frame.timestamp, det.count))
-                    states.write(frame.index, frame.timestamp, None)
-                    if overlay is not None:
-                        overlay.add(frame.bgr, det, None)
-                    bar.update(1)
-                    continue
-                if manual is not None and result.status != Status.TRACKING:
-                    raise InitialisationError(
-                        f"the manual labels of frame {frame.index} do not initialise the tracker; "
-                        "check them with `wristtrack label INPUT --labels FILE --check`"
-                    )
-                if result.frame != frame.index:  # after skipped frames: the recording's numbers
-                    result = replace(result, frame=frame.index)
-                if not learned and result.status == Status.TRACKING:
-                    _learn(detector, frame.bgr, det, result)
-                    learned = True
-                writer.write_result(result)
-                states.write(frame.index, frame.timestamp, result)
-                if overlay is not None:
-                    overlay.add(frame.bgr, det, result)
-                summary.add(result)
-                bar.update(1)
+                        return True
+                _track_frame(frame, run, labels, rows)
+                rows.bar.update(1)
         except KeyboardInterrupt:  # a second Ctrl-C: the last periodic checkpoint stands
-            interrupted = True
-        finally:
-            bar.close()
+            return True
+    return False
+
+
+def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None:
+    """One frame: detect, track, write its row. An unreadable frame, or one the tracker
+    refuses (a timestamp going backwards), is noted and written as a skipped row."""
+    if frame.error is not None:
+        _note_bad(rows.bar, run.bad_frames, frame.index, frame.error)
+        rows.skipped(frame.index, frame.timestamp, 0, "bad_frame")
+        return
+    det = run.detector.detect(frame.bgr, frame.depth, frame.timestamp)
+    manual = _frame_labels(labels, frame.index, det) if not run.learned else None
+    try:
+        result = run.tracker.step(det, manual)
+    except InputError as exc:
+        _note_bad(rows.bar, run.bad_frames, frame.index, str(exc))
+        rows.skipped(frame.index, frame.timestamp, det.count, "skipped")
+        if rows.overlay is not None:
+            rows.overlay.add(frame.bgr, det, None)
+        return
+    if manual is not None and result.status != Status.TRACKING:
+        raise InitialisationError(
+            f"the manual labels of frame {frame.index} do not initialise the tracker; "
+            "check them with `wristtrack label INPUT --labels FILE --check`"
+        )
+    if result.frame != frame.index:  # after skipped frames: the recording's numbers
+        result = replace(result, frame=frame.index)
+    if not run.learned and result.status == Status.TRACKING:
+        _learn(run.detector, frame.bgr, det, result)
+        run.learned = True
+    rows.tracked(frame.index, frame.timestamp, result)
+    if rows.overlay is not None:
+        rows.overlay.add(frame.bgr, det, result)
+    run.summary.add(result)
+
+
+# ------------------------------------------------------------------------------ finishing
+
+
+def _finish(
+    recording: Recording,
+    out: Path,
+    run: _RunState,
+    config: TrackerConfig,
+    settings: dict[str, Any],
+    smooth: bool,
+    interrupted: bool,
+    checkpoints: ckpt.Checkpointer,
+) -> dict[str, Any]:
+    """Smoothing (if asked for and the run is complete), then summary.json with the kinematics
+    of the final poses.csv. An interrupted run raises KeyboardInterrupt once its summary is
+    written; a run that never initialised raises InitialisationError."""
+    tracker, summary = run.tracker, run.summary
     if smooth and not interrupted:
         checkpoints.discard()  # smoothing rewrites poses.csv: the checkpoint's sizes lapse
-    if smooth and not interrupted and tracker.R_c0 is not None:
-        summary = SummaryAccumulator()  # the summary describes the smoothed poses
-        for result in smooth_run(
-            out, tracker.model, tracker.R_c0, tracker.t_c0, config.ukf, tracker.layout.side
-        ):
-            summary.add(result)
+        if tracker.R_c0 is not None:
+            summary = _smoothed_summary(out, tracker, config)
     data = summary.to_dict(
         hand_layout=tracker.layout.to_dict() if tracker.layout is not None else None,
         camera_pose_w0=camera_pose_dict(tracker.R_c0, tracker.t_c0),
-        camera=camera.to_dict(),
+        camera=recording.camera.to_dict(),
         source=str(recording.source),
         settings=settings,
-        skipped_frames=bad_frames,
+        skipped_frames=run.bad_frames,
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),
@@ -182,6 +254,19 @@ def track_recording(
     if tracker.R_c0 is None:  # the outputs say so too, but a run with no pose is a failure
         raise InitialisationError(_no_initialisation(recording, summary.frames, tracker))
     return data
+
+
+def _smoothed_summary(out: Path, tracker: Tracker, config: TrackerConfig) -> SummaryAccumulator:
+    """Smooth the run in ``out``; the summary of the smoothed poses."""
+    summary = SummaryAccumulator()
+    for result in smooth_run(
+        out, tracker.model, tracker.R_c0, tracker.t_c0, config.ukf, tracker.layout.side
+    ):
+        summary.add(result)
+    return summary
+
+
+# -------------------------------------------------------------------------------- helpers
 
 
 def _frame_labels(labels: Any, index: int, det) -> np.ndarray | None:
@@ -231,9 +316,10 @@ def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult) 
         detector.learn_markers(bgr, uv)
 
 
-def _skipped_row(index: int, timestamp: float, n_blobs: int, status: str = "skipped") -> list[str]:
+def _skipped_row(index: int, timestamp: float, n_blobs: int, status: str) -> list[str]:
     return pose_row(
-        index, timestamp, status, _NAN33, _NAN3, _NAN33, _NAN3, _NAN3, _NAN3, 0, n_blobs
+        index, timestamp, status, R_ch=_NAN33, t_ch=_NAN3, R=_NAN33, p=_NAN3, v=_NAN3, w=_NAN3,
+        n_visible=0, n_clutter=n_blobs,
     )
 
 
