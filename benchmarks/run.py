@@ -426,6 +426,10 @@ def main(argv: list[str] | None = None) -> int:
     rendered_compare = rendered_sections(
         rendered_recordings(cache, n_frames=render_frames), findings=findings
     )
+    from benchmarks.robustness import robustness_sections
+
+    robust = robustness_sections(cache, seeds, n_frames=120 if quick else None,
+                                 findings=findings)
     batch = _batch_section(findings, quick)
     command = "python -m benchmarks.run " + ("--quick" if quick else f"--seeds {args.seeds}")
     if args.no_soak:
@@ -468,6 +472,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         *pipeline,
         *rendered_compare,
+        *robust,
         *batch,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
