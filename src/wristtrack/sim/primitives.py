@@ -38,7 +38,8 @@ CIRCLE16 = np.column_stack(
 ) / np.cos(np.pi / 16)  # a 16-gon around the unit circle
 
 
-def cone(a, b, ra, rb, albedo, part) -> Cones:
+def cone(a: np.ndarray, b: np.ndarray, ra: float, rb: float, albedo: np.ndarray | list,
+         part: int) -> Cones:
     return Cones(np.atleast_2d(a), np.atleast_2d(b), np.array([ra]), np.array([rb]),
                   np.atleast_2d(albedo), np.array([part], dtype=np.uint8))
 
@@ -175,7 +176,8 @@ def box(size: tuple[float, float, float]) -> tuple[np.ndarray, ...]:
     return prism(square, hz, -hz)
 
 
-def place_solid(planes, R, t, albedo, part) -> Solid:
+def place_solid(planes: tuple[np.ndarray, ...], R: np.ndarray, t: np.ndarray,
+                albedo: np.ndarray | list, part: int | np.ndarray) -> Solid:
     """A local prism (normals, offsets, vertices) moved by p -> R p + t."""
     normals, offsets, verts = planes
     n = normals @ R.T
