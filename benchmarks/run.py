@@ -431,6 +431,9 @@ def main(argv: list[str] | None = None) -> int:
     robust = robustness_sections(cache, seeds, n_frames=120 if quick else None,
                                  findings=findings)
     batch = _batch_section(findings, quick)
+    from benchmarks.validation import validation_section
+
+    validation = validation_section(cache, quick, findings)
     command = "python -m benchmarks.run " + ("--quick" if quick else f"--seeds {args.seeds}")
     if args.no_soak:
         command += " --no-soak"
@@ -474,6 +477,7 @@ def main(argv: list[str] | None = None) -> int:
         *rendered_compare,
         *robust,
         *batch,
+        *validation,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(text))

@@ -203,3 +203,15 @@ def test_a_still_reference_cannot_be_aligned(scene, tmp_path):
         compare(run, tmp_path / "still.trc", cluster="C1,C2,C3")
     with pytest.raises(InputError, match="lie in a line"):
         compare(run, tmp_path / "still.trc", cluster="L1,L2,L3")
+
+
+def test_implausible_results_are_flagged():
+    from wristtrack.analysis.compare import _warnings
+
+    ok = {"clock_ratio": 1.0002, "speed_correlation": 0.9, "frames_registered": 100,
+          "frames_compared": 100}
+    assert _warnings(ok, 100) == []
+    bad = {**ok, "clock_ratio": 0.7, "speed_correlation": 0.2, "frames_registered": 40}
+    text = " ".join(_warnings(bad, 300))
+    for phrase in ("implausible", "correlate poorly", "only 40 of 100", "only 100 of our 300"):
+        assert phrase in text

@@ -27,7 +27,8 @@ from wristtrack.analysis.compare_reference import (
 )
 from wristtrack.analysis.compare_register import Registration, register
 from wristtrack.analysis.compare_stats import bland_altman, icc21, range_difference, rmse
-from wristtrack.analysis.kinematics import AXES, analyse
+from wristtrack.analysis.kinematics import analyse
+from wristtrack.analysis.range_of_motion import AXES
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.geometry import quat_from_matrix, rotation_distance, wrist_angles
 from wristtrack.hand import HandLayout
@@ -226,6 +227,7 @@ def compare(
         result["range_of_motion_deg"][axis] = {"ours": rom["range_ours"],
                                                "reference": rom["range_ref"]}
     result["reaches"] = _reach_agreement(cols, ref, reg)
+    result["warnings"] = _warnings(result, len(idx))
     ref_speed_t = (ref.times - reg.offset_s) / reg.ratio
     series = {
         "t": t[k], "ours_deg": ours_deg, "ref_deg": ref_deg, "pos_err_mm": pos_err,
@@ -248,6 +250,29 @@ def write_comparison(out_dir: str | Path, comparison: Comparison) -> tuple[Path,
     text = json.dumps(_finite(comparison.result), indent=2, allow_nan=False)
     write_text_atomic(json_path, text + "\n")
     return json_path, write_comparison_html(out / "comparison.html", comparison)
+
+
+# Two crystal clocks differ by well under 0.1 %; a fit further off has aligned the wrong
+# things (a lost track, a different take).
+RATIO_PLAUSIBLE = 1e-3
+
+
+def _warnings(result: dict[str, Any], frames_with_pose: int) -> list[str]:
+    """Plain-language doubts about this comparison (empty when there are none)."""
+    out = []
+    if abs(result["clock_ratio"] - 1.0) > RATIO_PLAUSIBLE:
+        out.append(f"clock ratio {result['clock_ratio']:.4f} is implausible for two crystal "
+                   "clocks: the alignment has probably failed (try --no-clock-ratio, --max-lag)")
+    if result["speed_correlation"] < 0.5:
+        out.append(f"the speed profiles correlate poorly ({result['speed_correlation']:.2f}): "
+                   "check that both recordings hold the same movement")
+    if result["frames_registered"] < 0.8 * result["frames_compared"]:
+        out.append(f"the registration kept only {result['frames_registered']} of "
+                   f"{result['frames_compared']} frames: many tracking outliers")
+    if result["frames_compared"] < 0.5 * frames_with_pose:
+        out.append(f"only {result['frames_compared']} of our {frames_with_pose} frames with a "
+                   "pose fall inside the reference's recording")
+    return out
 
 
 def _finite(obj: Any) -> Any:
@@ -285,5 +310,6 @@ def format_comparison(result: dict[str, Any]) -> str:
             f"{f(ba['loa_high_deg'])}], ICC(2,1) {f(result['icc'][axis], 3)}, RoM error "
             f"{f(result['rom_error_deg'][axis])} deg"
         )
+    lines += [f"warning: {w}" for w in result.get("warnings", [])]
     return "\n".join(lines)
 

@@ -130,7 +130,8 @@ def render_comparison_html(comparison: Comparison) -> str:
             f"<td>{_f(ba['bias'], 3)}</td><td>{_f(ba['loa_low'], 3)} .. "
             f"{_f(ba['loa_high'], 3)}</td><td>{_f(r['reaches'][key]['icc'], 3)}</td></tr>"
         )
-    notes = "".join(f"<p class=note>{e(n)}</p>" for n in r["reference"]["notes"])
+    notes = "".join(f"<p class=note>{e(n)}</p>"
+                    for n in [*r.get("warnings", []), *r["reference"]["notes"]])
     ref = r["reference"]
     body = f"""
 <h1>Validation against a reference system</h1>

@@ -1,0 +1,303 @@
+"""The "Validation" section of docs/BENCHMARKS.md: `wristtrack compare` against a motion-capture
+reference, on recorded motion from ../shared/realdata.
+
+- Round trips: real hand motion (a tennis serve's ball toss; the wheelchair-racing gloves,
+  slowed and shrunk to stay in the camera's view) drives the renderer; the simulated
+  motion-capture reference (100 Hz, its own lab frame, clock offset 0.4173 s and ratio 1.0002,
+  0.05 mm marker noise) is compared with the tracked run by `wristtrack compare`, both with our
+  six markers and with the glove's three-marker cluster; the planted values and `evaluate`'s
+  errors are the truth.
+- Stress case: the racing glove at full speed (3.6 m/s median at full size; here the time is
+  not scaled and the excursions are shrunk 0.2x, so the hand stays in view but moves and turns
+  as fast as the real glove, scaled), and the glove fully unscaled.
+- Real files: what the importers read from every file with hand or wrist markers, and the
+  optoelectronic noise floor (rigid-fit RMS of the hand clusters).
+
+``validation_section(cache, quick)`` returns the Markdown lines; benchmarks/run.py calls it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+KTK = REALDATA / "kineticstoolkit"
+SLOW = {"speed": 0.3, "position_scale": 0.2, "rotation_scale": 0.2}
+MAP = "WRIST=WRIST,CMC1=CMC1,MCP2=MCP2,MCP3=MCP3,MCP4=MCP4,MCP5=MCP5"
+
+
+def _motions(quick: bool) -> dict[str, tuple[str, str, dict[str, Any]]]:
+    long = 0.5 if quick else 1.0  # seconds of the racing recording
+    return {
+        "tennis toss (natural speed)": (
+            "kinematics_tennis_serve.c3d", "RWRA,RWRB,RFIN",
+            {"start_s": 1.0, "duration_s": 1.2 if quick else 1.6}),
+        "racing glove R (0.3x speed, 0.2x size)": (
+            "kinematics_racing_propulsion.c3d", "GloveR1,GloveR2,GloveR3",
+            {"start_s": 0.0, "duration_s": long, **SLOW}),
+        "racing glove L (0.3x speed, 0.2x size)": (
+            "kinematics_racing_propulsion.c3d", "GloveL1,GloveL2,GloveL3",
+            {"start_s": 2.0, "duration_s": long, **SLOW}),
+        "racing glove R, full speed (0.2x size)": (
+            "kinematics_racing_propulsion.c3d", "GloveR1,GloveR2,GloveR3",
+            {"start_s": 0.0, "duration_s": long, "position_scale": 0.2,
+             "rotation_scale": 0.2}),
+        "racing glove R, full speed and size": (
+            "kinematics_racing_propulsion.c3d", "GloveR1,GloveR2,GloveR3",
+            {"start_s": 0.0, "duration_s": long}),
+    }
+
+
+def _quiet(fn, *args, **kwargs):
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        return fn(*args, **kwargs)
+
+
+def _transform_errors(result: dict, planted: dict) -> tuple[float, float]:
+    from wristtrack.geometry import rotation_distance
+
+    R = np.array(result["registration"]["rotation"])
+    t = np.array(result["registration"]["translation"])
+    R0 = np.array(planted["registration"]["rotation"])
+    t0 = np.array(planted["registration"]["translation"])
+    c = np.array(result["registration"]["hand_centre_cam_m"])
+    return float(np.degrees(rotation_distance(R, R0))), float(
+        np.linalg.norm((R - R0) @ c + t - t0) * 1e3)
+
+
+def round_trip(cache: Path, name: str, file: str, cluster: str, options: dict) -> dict:
+    """Render, track (--smooth), evaluate and compare (markers and cluster) one motion."""
+    from wristtrack.analysis.compare import compare
+    from wristtrack.analysis.evaluate import evaluate
+    from wristtrack.cli import main
+    from wristtrack.errors import WristtrackError
+    from wristtrack.sim.recorded import render_recorded
+
+    slug = "".join(c if c.isalnum() else "_" for c in name)
+    rec, run = cache / f"val_{slug}_rec", cache / f"val_{slug}_run"
+    start = time.perf_counter()
+    render_recorded(rec, KTK / file, cluster.split(","), overwrite=True, **options)
+    code = _quiet(main, ["track", str(rec), "--out", str(run), "--smooth", "--no-report",
+                         "--no-progress"])
+    out: dict[str, Any] = {"name": name, "planted": json.loads(
+        (rec / "reference.json").read_text()), "track_exit": code}
+    out["seconds"] = time.perf_counter() - start
+    if code != 0:
+        return out
+    out["evaluate"] = evaluate(run / "poses.csv", rec / "truth.csv")
+    for mode, kw in (("markers", {"markers": MAP}), ("cluster", {"cluster": cluster})):
+        try:
+            out[mode] = compare(run, rec / "reference.c3d", **kw).result
+        except WristtrackError as exc:
+            out[mode] = {"error": str(exc)}
+    return out
+
+
+def _f(x: Any, digits: int = 2) -> str:
+    return "n/a" if x is None else f"{x:.{digits}f}"
+
+
+def _trip_rows(trips: list[dict]) -> list[str]:
+    rows = [
+        "| motion | reference | frames | offset error (ms) | 1 sigma | ratio - planted (ppm) "
+        "| rotation error (deg) | at the hand (mm) | pos. RMSE compare / evaluate (mm) "
+        "| orient. RMSE compare / evaluate (deg) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for trip in trips:
+        p, ev = trip["planted"], trip.get("evaluate")
+        for mode in ("markers", "cluster"):
+            r = trip.get(mode)
+            label = "our 6 markers" if mode == "markers" else "glove cluster (3)"
+            if r is None or "error" in r:
+                why = "tracking failed" if r is None else r["error"]
+                rows.append(f"| {trip['name']} | {label} | - | {why} | | | | | | |")
+                continue
+            ang, mm = _transform_errors(r, p)
+            rows.append(
+                f"| {trip['name']} | {label} | {r['frames_compared']} | "
+                f"{(r['time_offset_s'] - p['time_offset_s']) * 1e3:+.2f} | "
+                f"{r['time_offset_sigma_s'] * 1e3:.2f} | "
+                f"{(r['clock_ratio'] - p['clock_ratio']) * 1e6:+.0f} | {ang:.3f} | {mm:.2f} | "
+                f"{_f(r['pos_rmse_mm'])} / {_f(ev['position_rmse_mm'])} | "
+                f"{_f(r['rot_rmse_deg'])} / {_f(ev['orientation_rmse_deg'])} |"
+            )
+    return rows
+
+
+def _agreement_rows(trips: list[dict]) -> list[str]:
+    rows = [
+        "| motion | angle | bias (deg) | 95 % LoA (deg) | ICC(2,1) | RoM ours / ref. (deg) "
+        "| RoM error (deg) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for trip in trips:
+        r = trip.get("markers")
+        if r is None or "error" in r:
+            continue
+        for axis in ("deviation", "flexion", "pronation"):
+            ba = r["bland_altman"][axis]
+            rom = r["range_of_motion_deg"][axis]
+            rows.append(
+                f"| {trip['name']} | {axis} | {_f(ba['bias_deg'])} | {_f(ba['loa_low_deg'])} .. "
+                f"{_f(ba['loa_high_deg'])} | {_f(r['icc'][axis], 3)} | {_f(rom['ours'], 1)} / "
+                f"{_f(rom['reference'], 1)} | {_f(r['rom_error_deg'][axis])} |"
+            )
+    return rows
+
+
+def _stress_rows(trips: list[dict]) -> list[str]:
+    rows = ["| motion | max rotation from start (deg) | max displacement (mm) | coverage "
+            "| pos. / orient. RMSE vs truth | offset error, 6 markers (ms) |",
+            "|---|---|---|---|---|---|"]
+    for trip in trips:
+        m, ev = trip["planted"]["motion"], trip.get("evaluate")
+        r = trip.get("markers") or {}
+        off = ("n/a" if "time_offset_s" not in r else
+               f"{(r['time_offset_s'] - trip['planted']['time_offset_s']) * 1e3:+.1f}")
+        if ev is None:
+            rows.append(f"| {trip['name']} | {m['max_rotation_from_start_deg']:.0f} | "
+                        f"{m['max_displacement_m'] * 1e3:.0f} | never initialised | | |")
+            continue
+        rows.append(
+            f"| {trip['name']} | {m['max_rotation_from_start_deg']:.0f} | "
+            f"{m['max_displacement_m'] * 1e3:.0f} | {ev['coverage']:.0%} | "
+            f"{_f(ev['position_rmse_mm'])} mm / {_f(ev['orientation_rmse_deg'])} deg "
+            f"(failure rate {ev['failure_rate']:.0%}) | {off} |"
+        )
+    return rows
+
+
+def real_file_rows() -> list[str]:
+    """What the importers read from each real file with hand or wrist markers."""
+    from wristtrack.analysis.compare_reference import cluster_shape, rigid_fit
+    from wristtrack.io.markers.read import read_markers
+
+    clusters = {
+        "kinematics_racing_propulsion.c3d": "GloveR1,GloveR2,GloveR3",
+        "kinematics_racing_full.c3d": "GloveL1,GloveL2,GloveL3",
+        "kinematics_tennis_serve.c3d": "RWRA,RWRB,RFIN",
+        "static.c3d": "RHMH2,RHMH5,RUS,RRS",
+        "static.trc": "RHMH2,RHMH5,RUS,RRS",
+        "anat_pose_ECH.c3d": "RHMH2,RHMH5,RUS,RRS",
+        "kinematics_racing_probing_radial_styloid_R.c3d": "GloveR1,GloveR2,GloveR3",
+        "kinematics_racing_probing_ulnar_styloid_R.c3d": "GloveR1,GloveR2,GloveR3",
+        "kinematics_racing_static.c3d": "GloveL1,GloveL2,GloveL3",
+    }
+    rows = ["| file | stored in | rate (Hz) | frames | gaps | notes | hand markers rigid-fit RMS "
+            "(mm) |", "|---|---|---|---|---|---|---|"]
+    files = sorted(REALDATA.glob("*/*.c3d")) + sorted(REALDATA.glob("*/*.trc"))
+    for path in files:
+        data = read_markers(path)
+        gaps = float(np.isnan(data.xyz[:, :, 0]).mean())
+        fit = ""
+        if path.name in clusters:
+            labels = clusters[path.name].split(",")
+            xyz = data.select(labels)
+            try:
+                shape = cluster_shape(xyz)
+                _, _, rms = rigid_fit(shape, xyz)
+                fit = f"{np.nanmedian(rms) * 1e3:.3f} ({clusters[path.name]})"
+            except Exception as exc:  # reported, not hidden: the table says why
+                fit = f"n/a: {exc}"
+        rows.append(f"| {path.parent.name}/{path.name} | {data.units} | {data.rate:.2f} | "
+                    f"{len(data)} | {gaps:.1%} | {'; '.join(data.notes) or '-'} | {fit} |")
+    return rows
+
+
+def validation_section(cache: Path, quick: bool = False, findings: dict | None = None
+                       ) -> list[str]:
+    """Markdown lines of the Validation section (see the module docstring)."""
+    if not KTK.is_dir():
+        return ["## Validation against a reference system", "",
+                f"Skipped: {REALDATA} is not beside the repository.", ""]
+    cache.mkdir(parents=True, exist_ok=True)
+    trips = [round_trip(cache, name, *spec) for name, spec in _motions(quick).items()]
+    calm, stress = trips[:3], trips[3:]
+    worst: dict[str, float] = {}
+    for t in calm:
+        r, p, ev = t.get("markers"), t["planted"], t.get("evaluate")
+        if not r or "error" in r:
+            worst["failed"] = 1.0
+            continue
+        ang, mm = _transform_errors(r, p)
+        for key, value in (
+            ("offset_ms", abs(r["time_offset_s"] - p["time_offset_s"]) * 1e3),
+            ("rot_deg", ang), ("mm", mm),
+            ("pos_pct", abs(r["pos_rmse_mm"] / ev["position_rmse_mm"] - 1) * 100),
+            ("ori_pct", abs(r["rot_rmse_deg"] / ev["orientation_rmse_deg"] - 1) * 100),
+        ):
+            worst[key] = max(worst.get(key, 0.0), value)
+    if findings is not None:
+        findings["validation"] = worst
+    met = ("failed" not in worst and worst["offset_ms"] <= 2 and worst["rot_deg"] <= 0.1
+           and worst["mm"] <= 0.5 and worst["pos_pct"] <= 5 and worst["ori_pct"] <= 5)
+    summary = (
+        "Round trip on the three calm recorded motions, our six markers in the reference "
+        "(targets: offset 2 ms, transform 0.1 deg / 0.5 mm, RMSE within 5 % of `evaluate`): "
+        + ("**failed to track**" if "failed" in worst else
+           f"worst offset error {worst['offset_ms']:.2f} ms, transform {worst['rot_deg']:.3f} "
+           f"deg / {worst['mm']:.2f} mm at the hand, RMSE within {worst['pos_pct']:.1f} % "
+           f"(position) and {worst['ori_pct']:.1f} % (orientation): "
+           + ("met." if met else "**not met**."))
+    )
+    return [
+        "## Validation against a reference system",
+        "",
+        "`wristtrack compare` on `wristtrack simulate --motion` recordings driven by real "
+        "motion-capture data (../shared/realdata/kineticstoolkit). The reference is what a "
+        "motion-capture system would record of the rendered take: 100 Hz, its own lab frame, "
+        "clock offset 0.4173 s and ratio 1.0002 (planted), 0.05 mm marker noise per "
+        "coordinate; `compare` finds the offset by cross-correlating speeds, then fits offset, "
+        "clock ratio and registration jointly (1 sigma from the Jacobian, inflated for serial "
+        "correlation). Runs tracked with `--smooth`. Transform error 'at the hand' is the "
+        "registration's error where the hand was (a rotation error alone moves the lab image of "
+        "the camera origin 0.65 m away by 1.1 mm per 0.1 deg).",
+        "",
+        f"- {summary}",
+        "- With only the glove's three-marker cluster, the fixed offset from our hand frame to "
+        "the cluster's is unknown too and the small cluster's orientation is noisier: the "
+        "results are less precise and the reported sigma says by how much.",
+        "",
+        "### Round trips: recovered clock and registration",
+        "",
+        *_trip_rows(calm),
+        "",
+        "### Agreement as validation studies report it (our six markers in the reference)",
+        "",
+        *_agreement_rows(calm),
+        "",
+        "### Stress case: the wheelchair-racing glove at full speed",
+        "",
+        "The real glove moves at 3.6 m/s (median) and turns over 170 deg within 0.8 s. "
+        "Scaled to 0.2x of its size but at its own speed, and fully unscaled:",
+        "",
+        *_stress_rows(stress),
+        "",
+        *(_trip_rows(stress) if any(t.get("markers") for t in stress) else []),
+        "",
+        "### The real files through the importers",
+        "",
+        "Every file in ../shared/realdata with hand or wrist markers, as `compare` reads it "
+        "(metres inside; gaps as NaN). The rigid-fit RMS of a hand cluster over the take is "
+        "the optoelectronic noise floor plus skin motion.",
+        "",
+        *real_file_rows(),
+        "",
+    ]
+
+
+if __name__ == "__main__":  # python -m benchmarks.validation [--quick]: this section alone
+    import sys
+    import tempfile
+
+    lines = validation_section(Path(tempfile.gettempdir()) / "wristtrack-bench",
+                               quick="--quick" in sys.argv)
+    print("\n".join(lines))
