@@ -134,3 +134,19 @@ def test_clutter_threshold_is_where_likelihood_ratio_beats_priors():
     for blob, label in ((inside, 0), (outside, -1)):
         llr, _ = assoc.log_likelihood_ratios(blob, y_hat, S, params)
         assert assoc.associate_paper(llr, params)[0] == label
+
+
+def test_full_measurement_constants_give_the_pair_scores_and_the_gate():
+    """-pair_score = m2 / 2 + log(det S_j) / 2 + c, and gated exactly where m2 / 2 <= g: the
+    form the compiled tracker step scores pairs in, against the reference functions."""
+    rng = np.random.default_rng(9)
+    z, y_hat, S = _scene(rng, k=3, n_clutter=20)
+    llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, PARAMS)
+    c, g = assoc.full_measurement_constants(PARAMS)
+    logdet = np.linalg.slogdet(S)[1]
+    np.testing.assert_allclose(
+        -assoc.pair_scores(llr, PARAMS), d2 / 2 + logdet / 2 + c, rtol=1e-12, atol=1e-9
+    )
+    gated = assoc.gate(d2, z, PARAMS)
+    assert gated.any() and not gated.all()
+    np.testing.assert_array_equal(gated, d2 / 2 <= g)
