@@ -1,0 +1,144 @@
+"""The still start: the subject's layout and the fixed frame W0 from several frames, not one.
+
+The initialisation measures the layout (without hand.json) and W0 from a single frame. Kept as
+measured (DESIGN section 2: a real palm arches), one frame's depth noise sits in every marker's
+height and the hand frame built on them, and W0 is ~1 deg off: both leak into every relative
+angle for the rest of the recording. The hand is still and neutral at the start (the paper's
+assumption for initialisation), so :class:`StillStart` gathers the labelled markers' 3-D centres
+over the first tracked frames while the filter says the hand is still, and then gives
+
+- the layout averaged over those frames (:func:`wristtrack.hand.average_layout`, heights kept);
+- W0 as one pose fitted to the pixels and depths of all those frames at once (Gauss-Newton,
+  :func:`wristtrack.tracking.pose_fit.refine_pose` over the stacked markers), with its
+  covariance, which the tracker adds to the uncertainty of every relative pose. (Not the
+  filtered pose: at rest the filter, tuned to follow motion, is no better than one frame.)
+
+:func:`reanchor` re-expresses the filter's state (default model) in the refined hand frame and
+W0, so tracking goes on without a jump.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.detect.detections import Detections
+from wristtrack.errors import ConfigError, InitialisationError, InputError
+from wristtrack.geometry import skew
+from wristtrack.hand import HandLayout, average_layout, fit_pose
+from wristtrack.tracking.pose_fit import refine_pose
+
+STILL_FRAMES = 15  # frames averaged (0.5 s at 30 fps: the paper's still start)
+MIN_FRAMES = 5  # fewer usable frames before the hand moves: keep the one-frame layout
+STILL_SPEED = 0.03  # m/s; faster and the hand has started to move
+STILL_RATE = 0.25  # rad/s
+
+
+class StillStart:
+    """Collects a still hand's labelled marker centres frame by frame (see module doc)."""
+
+    def __init__(self, camera: Camera, n_frames: int = STILL_FRAMES) -> None:
+        self.camera = camera
+        self.n_frames = n_frames
+        self.frames: list[np.ndarray] = []  # (6,3) camera-frame centres, all six with depth
+        self.uv: list[np.ndarray] = []  # (6,2) and (6,) of every frame, NaN where unlabelled
+        self.depth: list[np.ndarray] = []
+        self.closed = False
+
+    def add(self, det: Detections, labels: np.ndarray, v: np.ndarray, w: np.ndarray) -> bool:
+        """Take one tracked frame (blob ``labels``, the filter's velocities ``v``, ``w``);
+        True once the still start is over (enough frames, or the hand started moving)."""
+        if self.closed:
+            return True
+        if (np.linalg.norm(v) > STILL_SPEED or np.linalg.norm(w) > STILL_RATE
+                or len(self.frames) >= self.n_frames):
+            self.closed = True
+            return True
+        blobs = np.flatnonzero(labels >= 0)
+        uv, z = np.full((6, 2), np.nan), np.full(6, np.nan)
+        uv[labels[blobs]] = det.uv[blobs]
+        if det.depth is not None:
+            z[labels[blobs]] = det.depth[blobs]
+        self.uv.append(uv)
+        self.depth.append(z)
+        if np.isfinite(z).all():
+            self.frames.append(self.camera.backproject(uv, z))
+        return False
+
+    def layout(self) -> HandLayout | None:
+        """The averaged layout (heights kept), or None when too few frames were gathered or
+        they do not make a valid layout (the one-frame layout then stays)."""
+        if len(self.frames) < MIN_FRAMES:
+            return None
+        try:
+            return average_layout(np.array(self.frames))[0]
+        except (ConfigError, InputError):
+            return None
+
+
+    def w0(self, layout: HandLayout, R0: np.ndarray, t0: np.ndarray):
+        """(R_ch, t_ch, cov (6,6)) of the hand over the still start with ``layout``: one pose
+        fitted to every frame's markers (start R0, t0), or None with too few frames or no fit.
+        """
+        if len(self.uv) < MIN_FRAMES:
+            return None
+        n = len(self.uv)
+        stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times
+        depth = np.concatenate(self.depth)
+        try:
+            fit = refine_pose(np.concatenate(self.uv), depth, self.camera, stacked, R0, t0,
+                              depth_sigma=None if np.isfinite(depth).any() else 1.0)
+        except InitialisationError:
+            return None
+        return fit.R_ch, fit.t_ch, fit.cov
+
+
+def reanchor(
+    x: np.ndarray,
+    P: np.ndarray,
+    R_c0: np.ndarray,
+    t_c0: np.ndarray,
+    old: HandLayout,
+    new: HandLayout,
+    w0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The default model's state (x (18,), P (12,12)) and W0 re-expressed for layout ``new``.
+
+    The new hand frame is the old one moved by T (the rigid fit of ``new`` onto ``old``:
+    p_old = T_R p_new + T_t). W0 moves with it, or becomes ``w0`` = (R_ch, t_ch, cov): a pose
+    of the new hand frame in the camera with its (6,6) covariance over camera-frame
+    perturbations (dphi, dt), e.g. :meth:`StillStart.w0`. Returns (x, P, R_c0, t_c0, w0_cov):
+    ``w0_cov`` is W0's covariance in W0 axes (zero when W0 only moved). The state covariance is
+    mapped by the Jacobian of the change of frame.
+    """
+    T_R, T_t = fit_pose(old, new.points)
+    R, p = x[:9].reshape(3, 3), x[9:12]
+    v, w = x[12:15], x[15:18]
+    # hand -> camera in the new frame, then relative to the moved W0
+    R_c0n, t_c0n = R_c0 @ T_R, t_c0 + R_c0 @ T_t
+    Rn = T_R.T @ R @ T_R
+    arm = R @ T_t  # the new origin's offset from the old one, in W0
+    pn = T_R.T @ (p + arm - T_t)
+    vn = T_R.T @ (v + np.cross(w, arm))
+    wn = T_R.T @ w
+    J = np.zeros((12, 12))
+    for k in range(4):
+        J[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = T_R.T
+    J[3:6, 0:3] = -T_R.T @ skew(arm)  # a turn of the hand moves the new origin
+    Pn = J @ P @ J.T
+    w0_cov = np.zeros((6, 6))
+    if w0 is not None:
+        # the current hand pose in the camera, then relative to the given W0; velocities and
+        # every tangent block rotate from the moved W0's axes into the given one's
+        R_w, t_w, cov_w = w0
+        R_ch, t_ch = R_c0n @ Rn, R_c0n @ pn + t_c0n
+        Q = R_w.T @ R_c0n
+        Rn, pn = R_w.T @ R_ch, R_w.T @ (t_ch - t_w)
+        vn, wn = Q @ vn, Q @ wn
+        M = np.kron(np.eye(4), Q)
+        Pn = M @ Pn @ M.T
+        rot = np.kron(np.eye(2), R_w.T)  # camera-frame perturbations into W0 axes
+        w0_cov = rot @ cov_w @ rot.T
+        R_c0n, t_c0n = R_w, t_w
+    xn = np.concatenate((Rn.reshape(9), pn, vn, wn))
+    return xn, 0.5 * (Pn + Pn.T), R_c0n, t_c0n, w0_cov

@@ -1,0 +1,115 @@
+"""tracking.neutral: W0 and the layout from the still start, and the change of frame.
+
+Truth: the measurement-level simulator (0.7 px blobs, Kinect-like depth) on a still hand whose
+pose is known; the change of frame is checked against the marker positions it must keep.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from wristtrack.camera import Camera
+from wristtrack.hand import HandLayout, estimate_layout, fit_pose
+from wristtrack.sim.detections import NoiseModel, simulate_detections
+from wristtrack.sim.motion import Trajectory
+from wristtrack.tracking.neutral import StillStart, reanchor
+from wristtrack.tracking.pose_fit import initial_guess, refine_pose
+
+
+def arched() -> HandLayout:
+    p = HandLayout.default().points.copy()
+    p[:, 2] = [0.0, -0.0045, 0.006, 0.007, 0.006, 0.0045]
+    return estimate_layout(p @ np.diag([1.0, -1.0, -1.0]) + [0.0, 0.0, 0.6])[0]
+
+
+def still_frames(layout: HandLayout, rng: np.random.Generator, n: int = 15):
+    R = (Rotation.from_rotvec(rng.normal(scale=0.2, size=3))
+         * Rotation.from_euler("X", np.pi)).as_matrix()
+    t = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(0.5, 0.7)])
+    zeros = np.zeros((n, 3))
+    traj = Trajectory(t=np.arange(n) / 30.0, R_ch=np.repeat(R[None], n, 0),
+                      t_ch=np.repeat(t[None], n, 0), R_rel=np.repeat(np.eye(3)[None], n, 0),
+                      p_rel=zeros, v=zeros, w=zeros, angles=zeros)
+    noise = NoiseModel(clutter_mean=0.0, p_miss=0.0)
+    return R, t, simulate_detections(traj, Camera.default(), layout, noise, rng)
+
+
+def angle_deg(A: np.ndarray, B: np.ndarray) -> float:
+    return float(np.degrees(Rotation.from_matrix(A.T @ B).magnitude()))
+
+
+def test_still_start_w0_and_layout_beat_one_frame():
+    """Over 15 still frames, W0 fitted to all of them is ~sqrt(15) times closer to the true pose
+    than the one-frame fit, and the averaged layout's heights much closer to the true ones."""
+    cam, layout = Camera.default(), arched()
+    rng = np.random.default_rng(4)
+    one_rot, many_rot, one_h, many_h = [], [], [], []
+    for _ in range(12):
+        R, t, frames = still_frames(layout, rng)
+        still = StillStart(cam)
+        zero = np.zeros(3)
+        for f in frames:
+            assert not still.add(f.detections, f.labels, zero, zero)
+        assert still.add(frames[-1].detections, frames[-1].labels, zero, zero)  # 15: over
+        first = frames[0]
+        uv = first.detections.uv[np.argsort(first.labels)]
+        z = first.detections.depth[np.argsort(first.labels)]
+        R0, t0 = initial_guess(uv, z, cam, layout)
+        fit = refine_pose(uv, z, cam, layout, R0, t0)
+        one_rot.append(angle_deg(fit.R_ch, R))
+        R_w, t_w, cov = still.w0(layout, R0, t0)
+        many_rot.append(angle_deg(R_w, R))
+        assert cov.shape == (6, 6) and np.all(np.linalg.eigvalsh(cov) > 0)
+        assert np.trace(cov[:3, :3]) < np.trace(fit.cov[:3, :3]) / 8  # ~1/15 of one frame's
+        one = estimate_layout(cam.backproject(uv, z))[0]
+        averaged = still.layout()
+        one_h.append(one.points[:, 2] - layout.points[:, 2])
+        many_h.append(averaged.points[:, 2] - layout.points[:, 2])
+    rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
+    assert rms(many_rot) < rms(one_rot) / 2.5, (rms(one_rot), rms(many_rot))
+    assert rms(many_h) < rms(one_h) / 2.5, (rms(one_h), rms(many_h))
+
+
+def test_still_start_ends_when_the_hand_moves_and_needs_enough_frames():
+    cam, layout = Camera.default(), arched()
+    _, _, frames = still_frames(layout, np.random.default_rng(1), n=4)
+    still = StillStart(cam)
+    for f in frames[:3]:
+        still.add(f.detections, f.labels, np.zeros(3), np.zeros(3))
+    assert still.add(frames[3].detections, frames[3].labels, np.array([0.1, 0, 0]), np.zeros(3))
+    assert still.layout() is None  # 3 frames: too few to replace the one-frame layout
+    assert still.w0(layout, np.eye(3), np.array([0, 0, 0.6])) is None
+
+
+def test_reanchor_keeps_the_markers_where_they_are():
+    """Moving to a new layout's hand frame (and to a new W0) changes the numbers, never where
+    the state puts the markers in the camera; the velocities of the markers are kept too."""
+    rng = np.random.default_rng(0)
+    old, new = HandLayout.default(), arched()
+    R_c0 = Rotation.random(random_state=2).as_matrix()
+    t_c0 = np.array([0.01, 0.02, 0.6])
+    R = Rotation.from_rotvec(rng.normal(scale=0.3, size=3)).as_matrix()
+    p, v, w = rng.normal(scale=0.05, size=3), rng.normal(scale=0.1, size=3), rng.normal(size=3)
+    x = np.concatenate([R.reshape(9), p, v, w])
+    P = np.diag(rng.uniform(1e-6, 1e-4, 12))
+    T_R, T_t = fit_pose(old, new.points)
+    # where the old state puts the new layout's markers, and how fast they move (camera frame)
+    R_ch, t_ch = R_c0 @ R, R_c0 @ p + t_c0
+    pts = (new.points @ T_R.T + T_t) @ R_ch.T + t_ch
+    vel = R_c0 @ v + np.cross(R_c0 @ w, pts - t_ch)
+    W = Rotation.from_rotvec([0.01, -0.02, 0.005]).as_matrix() @ R_c0 @ T_R
+    for w0 in (None, (W, t_c0 + [0.001, 0.0, -0.002], np.eye(6) * 1e-6)):
+        xn, Pn, R_c0n, t_c0n, w0_cov = reanchor(x, P, R_c0, t_c0, old, new, w0)
+        Rn, pn, vn, wn = xn[:9].reshape(3, 3), xn[9:12], xn[12:15], xn[15:18]
+        R_chn, t_chn = R_c0n @ Rn, R_c0n @ pn + t_c0n
+        np.testing.assert_allclose(new.points @ R_chn.T + t_chn, pts, atol=1e-12)
+        vel_n = R_c0n @ vn + np.cross(R_c0n @ wn, pts - t_chn)
+        np.testing.assert_allclose(vel_n, vel, atol=1e-12)
+        np.testing.assert_allclose(Rn.T @ Rn, np.eye(3), atol=1e-12)
+        assert np.allclose(Pn, Pn.T) and np.all(np.linalg.eigvalsh(Pn) > 0)
+        if w0 is None:
+            np.testing.assert_array_equal(w0_cov, 0.0)
+        else:
+            np.testing.assert_allclose(R_c0n, W)
+            np.testing.assert_allclose(np.trace(w0_cov), 6e-6)  # rotated, not scaled
