@@ -9,6 +9,11 @@ from monalysa.quality.smoothness import log_dimensionless_jerk as mona_ldlj
 from monalysa.quality.smoothness import sparc as mona_sparc
 
 from wristtrack.analysis import kinematics as kin
+from wristtrack.analysis import motion_profiles as profiles
+from wristtrack.analysis import range_of_motion as motion_range
+from wristtrack.analysis import reaches as segmentation
+from wristtrack.analysis import smoothness as sm
+from wristtrack.analysis.kinematics_settings import KinematicsSettings
 from wristtrack.cli import main
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.geometry import quat_from_matrix
@@ -25,7 +30,7 @@ from wristtrack.sim.motion import (
 from wristtrack.sim.render import render_recording
 from wristtrack.sim.scenario_run import track_scenario
 
-SETTINGS = kin.KinematicsSettings()
+SETTINGS = KinematicsSettings()
 
 
 def mj_speed(t, t0, T, D):
@@ -63,7 +68,7 @@ def test_minimum_jerk_reach_against_analytic_values_and_monalysa(fs):
     D, T, t0 = 0.3, 1.2, 0.8
     t = np.arange(int(round(3.0 * fs))) / fs
     cols = columns_1d(t, mj_position(t, t0, T, D), mj_speed(t, t0, T, D))
-    result = kin.analyse(cols, kin.KinematicsSettings(lowpass_hz=0.0))  # the exact samples
+    result = kin.analyse(cols, KinematicsSettings(lowpass_hz=0.0))  # the exact samples
     assert len(result["reaches"]) == 1
     r = result["reaches"][0]
     assert r["peak_speed_m_s"] == pytest.approx(1.875 * D / T, rel=1e-12)  # t0 + T/2 is a sample
@@ -96,8 +101,8 @@ def test_log_dimensionless_jerk_tends_to_the_analytic_value():
     fs, D, T = 2000.0, 0.25, 0.9
     t = np.arange(int(round(T * fs)) + 1) / fs
     v = mj_speed(t, 0.0, T, D)
-    assert kin.log_dimensionless_jerk(v, fs) == pytest.approx(-np.log(204.8), abs=0.01)
-    assert kin.sparc(v, fs) == pytest.approx(mona_sparc(v, fs)[0], abs=1e-12)
+    assert sm.log_dimensionless_jerk(v, fs) == pytest.approx(-np.log(204.8), abs=0.01)
+    assert sm.sparc(v, fs) == pytest.approx(mona_sparc(v, fs)[0], abs=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -111,8 +116,8 @@ def test_sparc_and_ldlj_match_monalysa_on_irregular_profiles(seed):
         for _ in range(3)
     ]
     v = sum(mj_speed(t, *p) for p in pulses) + np.abs(rng.normal(0, 0.01, n))
-    assert kin.sparc(v, fs) == pytest.approx(mona_sparc(v, fs)[0], abs=1e-12)
-    assert kin.log_dimensionless_jerk(v, fs) == pytest.approx(mona_ldlj(v, fs, "vel"), abs=1e-12)
+    assert sm.sparc(v, fs) == pytest.approx(mona_sparc(v, fs)[0], abs=1e-12)
+    assert sm.log_dimensionless_jerk(v, fs) == pytest.approx(mona_ldlj(v, fs, "vel"), abs=1e-12)
 
 
 def test_a_jerkier_movement_scores_lower():
@@ -120,8 +125,8 @@ def test_a_jerkier_movement_scores_lower():
     t = np.arange(180) / fs
     smooth = mj_speed(t, 0.5, 1.5, 0.3)
     jerky = smooth + mj_speed(t, 1.2, 0.4, 0.05)
-    assert kin.sparc(jerky, fs) < kin.sparc(smooth, fs)
-    assert kin.log_dimensionless_jerk(jerky, fs) < kin.log_dimensionless_jerk(smooth, fs)
+    assert sm.sparc(jerky, fs) < sm.sparc(smooth, fs)
+    assert sm.log_dimensionless_jerk(jerky, fs) < sm.log_dimensionless_jerk(smooth, fs)
 
 
 # ------------------------------------------------------------------------- segmentation
@@ -156,25 +161,25 @@ def test_noise_on_the_speed_does_not_split_a_reach(seed):
     v = mj_speed(t, 1.0, 1.4, 0.3)
     noise = np.random.default_rng(seed).normal(0.0, 1.0, t.size)
     noisy = np.abs(v + 0.008 * noise)  # 8 mm/s: the 2 % threshold is 6.4 mm/s
-    reaches = kin.segment_reaches(t, noisy, SETTINGS)
+    reaches = segmentation.segment_reaches(t, noisy, SETTINGS)
     assert len(reaches) == 1
     s, e = reaches[0]
     assert s < 1.7 * fs < e  # around the true peak
     # Wiggles well under the 20 mm/s unit rise do not add movement units.
     quieter = np.abs(v + 0.003 * noise)
-    s, e = kin.segment_reaches(t, quieter, SETTINGS)[0]
-    assert kin.movement_units(t[s : e + 1], quieter[s : e + 1]) == 1
+    s, e = segmentation.segment_reaches(t, quieter, SETTINGS)[0]
+    assert sm.movement_units(t[s : e + 1], quieter[s : e + 1]) == 1
 
 
 def test_entry_threshold_ignores_rest_and_slow_drift():
     fs = 30.0
     t = np.arange(int(5.0 * fs)) / fs
     rest = np.abs(np.random.default_rng(0).normal(0.0, 0.01, t.size))  # up to ~4 cm/s at rest
-    assert kin.segment_reaches(t, rest, SETTINGS) == []
+    assert segmentation.segment_reaches(t, rest, SETTINGS) == []
     slow = mj_speed(t, 1.0, 2.0, 0.08)  # peak 7.5 cm/s: above entry, below min peak speed
-    assert kin.segment_reaches(t, slow, SETTINGS) == []
-    short = kin.KinematicsSettings(min_duration_s=3.0)
-    assert kin.segment_reaches(t, mj_speed(t, 1.0, 1.2, 0.3), short) == []
+    assert segmentation.segment_reaches(t, slow, SETTINGS) == []
+    short = KinematicsSettings(min_duration_s=3.0)
+    assert segmentation.segment_reaches(t, mj_speed(t, 1.0, 1.2, 0.3), short) == []
 
 
 def test_a_gap_ends_a_reach():
@@ -186,7 +191,7 @@ def test_a_gap_ends_a_reach():
     gap = slice(int((t0 + 0.6 * T) * fs), int((t0 + 0.6 * T) * fs) + 4)  # after the peak
     x[gap] = np.nan
     v[gap] = np.nan
-    result = kin.analyse(columns_1d(t, x, v), kin.KinematicsSettings(lowpass_hz=0.0))
+    result = kin.analyse(columns_1d(t, x, v), KinematicsSettings(lowpass_hz=0.0))
     r1, r2 = result["reaches"]
     assert r1["end_frame"] == gap.start - 1 and r1["truncated"]
     assert r2["start_frame"] == gap.stop and r2["truncated"]
@@ -209,7 +214,7 @@ def test_two_overlapping_pulses_are_one_reach_with_two_units():
     assert len(reaches) == 1
     assert reaches[0]["movement_units"] == 2
     s, e = reaches[0]["start_frame"], reaches[0]["end_frame"]
-    assert kin.movement_units(t[s : e + 1], mj_speed(t, *one)[s : e + 1]) == 1
+    assert sm.movement_units(t[s : e + 1], mj_speed(t, *one)[s : e + 1]) == 1
 
 
 def test_movement_units_rise_and_interval_rules():
@@ -218,13 +223,13 @@ def test_movement_units_rise_and_interval_rules():
     base = mj_speed(t, 0.2, 1.2, 0.3)
     # a bump of peak 15 mm/s: under the 20 mm/s rise, not a unit
     small = base + mj_speed(t, 1.0, 0.3, 0.015 * 0.3 / 1.875)
-    assert kin.movement_units(t, small) == 1
+    assert sm.movement_units(t, small) == 1
     # two 60 mm/s bumps 100 ms apart count once (peaks < 150 ms apart), 300 ms apart twice
     bump = (0.06 * 0.1 / 1.875,)
     close = mj_speed(t, 0.5, 0.1, *bump) + mj_speed(t, 0.6, 0.1, *bump)
     apart = mj_speed(t, 0.5, 0.1, *bump) + mj_speed(t, 0.8, 0.1, *bump)
-    assert kin.movement_units(t, close) == 1
-    assert kin.movement_units(t, apart) == 2
+    assert sm.movement_units(t, close) == 1
+    assert sm.movement_units(t, apart) == 2
 
 
 # ----------------------------------------------------------------- RoM, path length, speeds
@@ -239,7 +244,7 @@ def test_range_of_motion_of_hand_built_angles():
         [4.0, nan, nan],
         [nan, 10.0, nan],
     ])
-    rom = kin.range_of_motion(angles)
+    rom = motion_range.range_of_motion(angles)
     assert rom["deviation"] == {
         "min_deg": -7.5, "max_deg": 4.0, "range_deg": 11.5, "start_deg": 2.0, "end_deg": 4.0
     }
@@ -257,7 +262,7 @@ def test_path_length_of_a_polyline_with_a_gap():
         [np.nan, 0.0, 0.0],  # one unknown coordinate is a gap too
         [20.0, 0.0, 0.0],
     ])
-    assert kin.path_length(p) == pytest.approx(18.0, abs=1e-12)
+    assert profiles.path_length(p) == pytest.approx(18.0, abs=1e-12)
     t = np.arange(len(p)) * 0.1
     cols = {"timestamp": t, "tx": p[:, 0], "ty": p[:, 1], "tz": p[:, 2]}
     assert kin.analyse(cols)["path_length_m"] == pytest.approx(18.0, abs=1e-12)
@@ -266,29 +271,29 @@ def test_path_length_of_a_polyline_with_a_gap():
 def test_speed_falls_back_to_differences_and_angular_speed_to_quaternions():
     tr, _, _ = scenario("reach", fps=60.0)
     q = quat_from_matrix(tr.R_rel)
-    speed = kin.speed_profile(tr.t, tr.p_rel)  # no velocity: central differences
+    speed = profiles.speed_profile(tr.t, tr.p_rel)  # no velocity: central differences
     truth = np.linalg.norm(tr.v, axis=1)
     assert np.max(np.abs(speed - truth)) < 0.01 * truth.max()
-    rate = kin.angular_speed_profile(tr.t, q)
+    rate = profiles.angular_speed_profile(tr.t, q)
     w_truth = np.linalg.norm(tr.w, axis=1)
     assert np.max(np.abs(rate - w_truth)) < 0.01 * w_truth.max()
     # Given and finite velocities are used as they are; a missing one is filled in.
     v = tr.v.copy()
     v[10] = np.nan
-    mixed = kin.speed_profile(tr.t, tr.p_rel, v)
+    mixed = profiles.speed_profile(tr.t, tr.p_rel, v)
     np.testing.assert_array_equal(np.delete(mixed, 10), np.delete(truth, 10))
     assert mixed[10] == pytest.approx(truth[10], abs=1e-4)
     # Unknown positions are gaps even if a velocity is present.
     p = tr.p_rel.copy()
     p[20] = np.nan
-    assert np.isnan(kin.speed_profile(tr.t, p, tr.v)[20])
+    assert np.isnan(profiles.speed_profile(tr.t, p, tr.v)[20])
 
 
 def test_lowpass_passes_slow_motion_stops_fast_noise_and_respects_gaps():
     fs = 60.0
     t = np.arange(600) / fs
     slow, fast = np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 15.0 * t)
-    out = kin.lowpass(t, slow + fast, 6.0)
+    out = profiles.lowpass(t, slow + fast, 6.0)
     inner = slice(60, -60)  # away from the ends' transients
     assert np.max(np.abs(out[inner] - slow[inner])) < 0.02  # 1 Hz through, 15 Hz down ~ -28 dB
     # Each run between gaps is filtered on its own: what happens after a gap does not leak back.
@@ -296,14 +301,14 @@ def test_lowpass_passes_slow_motion_stops_fast_noise_and_respects_gaps():
     x[300:305] = np.nan
     y = x.copy()
     y[305:] += 5.0
-    fx, fy = kin.lowpass(t, x, 6.0), kin.lowpass(t, y, 6.0)
+    fx, fy = profiles.lowpass(t, x, 6.0), profiles.lowpass(t, y, 6.0)
     assert np.isnan(fx[300:305]).all()
     np.testing.assert_array_equal(fx[:300], fy[:300])
     # Irregular timing (jitter, dropped frames): resampled, so a smooth signal stays as it is.
     rng = np.random.default_rng(0)
     ti = np.sort(rng.choice(t, 450, replace=False)) + rng.uniform(-0.004, 0.004, 450)
     si = np.sin(2 * np.pi * 1.0 * ti)
-    assert np.max(np.abs(kin.lowpass(ti, si, 6.0)[40:-40] - si[40:-40])) < 0.01
+    assert np.max(np.abs(profiles.lowpass(ti, si, 6.0)[40:-40] - si[40:-40])) < 0.01
 
 
 def test_metrics_of_a_tracked_reach_agree_with_its_truth(tmp_path):
@@ -405,9 +410,9 @@ def test_empty_and_untracked_runs_give_json_ready_results():
 
 def test_bad_input_raises_one_line_errors(tmp_path):
     with pytest.raises(ConfigError, match="onset_fraction"):
-        kin.KinematicsSettings(onset_fraction=2.0)
+        KinematicsSettings(onset_fraction=2.0)
     with pytest.raises(ConfigError, match="min_duration_s"):
-        kin.KinematicsSettings(min_duration_s=-1.0)
+        KinematicsSettings(min_duration_s=-1.0)
     with pytest.raises(InputError, match="lack tx"):
         kin.analyse({"timestamp": np.zeros(3)})
     t = np.array([0.0, 0.1, 0.1, 0.3])
@@ -418,7 +423,7 @@ def test_bad_input_raises_one_line_errors(tmp_path):
     with pytest.raises(InputError, match="poses.csv"):
         kin.analyse_file(bad)
     with pytest.raises(InputError, match="SPARC"):
-        kin.sparc(np.array([1.0]), 30.0)
+        sm.sparc(np.array([1.0]), 30.0)
 
 
 def test_track_writes_kinematics_of_poses_csv_and_prints_the_reaches(tmp_path, capsys):

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from wristtrack import __version__
-from wristtrack.analysis.kinematics import KinematicsSettings, analyse, lowpass, velocity_profile
+from wristtrack.analysis.kinematics import analyse, speed_series
+from wristtrack.analysis.kinematics_settings import KinematicsSettings
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.io.atomic import write_bytes_atomic
 from wristtrack.io.run_folder import read_run
@@ -81,19 +82,15 @@ def _kinematics(columns: dict[str, np.ndarray], summary: dict[str, Any]) -> dict
 
 
 def _speeds(
-    columns: dict[str, np.ndarray], p: np.ndarray, kin: dict[str, Any] | None
+    columns: dict[str, np.ndarray], kin: dict[str, Any] | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(as tracked, as analysed) wrist speed: the filter's |v| (differences of p where v is
-    unknown), and the same after the kinematics' low-pass, the speed the reaches were segmented
-    and measured on (kinematics.analyse does the same steps)."""
-    t = columns["timestamp"]
-    velocity = velocity_profile(t, p, np.column_stack([columns[c] for c in ("vx", "vy", "vz")]))
-    raw = np.linalg.norm(velocity, axis=1)
+    """(as tracked, as analysed) wrist speed (kinematics.speed_series), with the low-pass the
+    run's stored analysis used."""
     settings = (kin or {}).get("settings") or {}
     cutoff = settings.get("lowpass_hz", KinematicsSettings().lowpass_hz)
     if not (isinstance(cutoff, int | float) and cutoff > 0):
-        return raw, raw
-    return raw, np.linalg.norm(lowpass(t, velocity, float(cutoff)), axis=1)
+        cutoff = 0.0  # no low-pass: the analysed speed is the tracked one
+    return speed_series(columns, KinematicsSettings(lowpass_hz=float(cutoff)))
 
 
 # ------------------------------------------------------------------------------ figures
@@ -120,7 +117,7 @@ def build_figures(columns: dict[str, np.ndarray], kin: dict[str, Any] | None) ->
     if ok.any():
         R[ok] = matrix_from_quat(q[ok])
     angles = np.column_stack([columns[f"{a}_deg"] for a in rf.AXIS_NAMES])
-    raw_speed, speed = _speeds(columns, p_m, kin)
+    raw_speed, speed = _speeds(columns, kin)
     reaches = _reach_frames(kin, len(t))
     peaks = [a + int(np.nanargmax(speed[a:b + 1])) for a, b in reaches
              if np.isfinite(speed[a:b + 1]).any()]
