@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 import types
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
@@ -86,6 +87,9 @@ def frame_constants(
 # ----------------------------------------------------------------------------- loading
 
 _loaded: tuple[Callable | None, str] | None = None  # (the compiled step or None, description)
+_loading = threading.Lock()  # one compile per process, even with trackers in several threads
+# the step's helpers as Python functions, before _jit rebinds their names in kernel
+_PYTHON_HELPERS = {name: getattr(kernel, name) for name in kernel.HELPERS}
 
 
 def load() -> Callable | None:
@@ -93,8 +97,9 @@ def load() -> Callable | None:
     tracker then takes the generic path). The first call in a process imports numba and
     compiles the step or loads it from the on-disk cache; later calls return it at once."""
     global _loaded
-    if _loaded is None:
-        _loaded = _compile()
+    with _loading:
+        if _loaded is None:
+            _loaded = _compile()
     return _loaded[0]
 
 
@@ -130,9 +135,9 @@ def _jit(numba) -> Callable:
     hence the closure over a digest of all the code compiled into it.
     """
     names = vars(kernel)
-    functions = [names[name] for name in kernel.HELPERS] + [kernel.step]
-    for name in kernel.HELPERS:
-        names[name] = numba.njit(nogil=True, error_model="numpy")(names[name])
+    functions = [*_PYTHON_HELPERS.values(), kernel.step]
+    for name, function in _PYTHON_HELPERS.items():
+        names[name] = numba.njit(nogil=True, error_model="numpy")(function)
     global _kernel_step
     _kernel_step = numba.njit(nogil=True, error_model="numpy")(kernel.step)
     digest = _code_digest(functions)
