@@ -24,7 +24,7 @@ from wristtrack.errors import InputError
 from wristtrack.geometry import matrix_from_quat, so3_log
 
 
-def runs(valid: np.ndarray) -> list[tuple[int, int]]:
+def true_spans(valid: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) half-open index ranges of the runs of True in ``valid``."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], valid.astype(np.int8), [0]])))
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
@@ -32,7 +32,7 @@ def runs(valid: np.ndarray) -> list[tuple[int, int]]:
 
 def _check_times(t: np.ndarray, valid: np.ndarray) -> None:
     """Timestamps must increase along each run of valid rows (they are differentiated)."""
-    for a, b in runs(valid):
+    for a, b in true_spans(valid):
         dt = np.diff(t[a:b])
         bad = np.flatnonzero(~(dt > 0))
         if bad.size:
@@ -73,7 +73,7 @@ def velocity_profile(t: np.ndarray, p: np.ndarray, v: np.ndarray | None = None) 
         use = valid & np.isfinite(v).all(axis=1)
         out[use] = v[use]
     need = valid & ~np.isfinite(out).all(axis=1)
-    for a, b in runs(valid):
+    for a, b in true_spans(valid):
         if b - a >= 2 and need[a:b].any():
             dp = np.gradient(p[a:b], t[a:b], axis=0, edge_order=1)
             out[a:b] = np.where(need[a:b, None], dp, out[a:b])
@@ -103,7 +103,7 @@ def angular_velocity_profile(
         use = valid & np.isfinite(w).all(axis=1)
         out[use] = w[use]
     need = valid & ~np.isfinite(out).all(axis=1)
-    for a, b in runs(valid):
+    for a, b in true_spans(valid):
         if b - a < 2 or not need[a:b].any():
             continue
         R = matrix_from_quat(q[a:b])
@@ -142,7 +142,7 @@ def lowpass(t: np.ndarray, x: np.ndarray, cutoff_hz: float, order: int = 2) -> n
     valid = np.isfinite(x2).all(axis=1) & np.isfinite(t)
     _check_times(t, valid)
     out = np.where(valid[:, None], x2, np.nan)
-    for a, b in runs(valid):
+    for a, b in true_spans(valid):
         if b - a < 4:
             continue
         tt, xx = t[a:b], x2[a:b]

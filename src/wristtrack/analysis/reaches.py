@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.analysis.kinematics_settings import KinematicsSettings
-from wristtrack.analysis.motion_profiles import path_length, runs
+from wristtrack.analysis.motion_profiles import path_length, true_spans
 from wristtrack.analysis.smoothness import log_dimensionless_jerk, movement_units, sparc
 from wristtrack.errors import InputError
 
@@ -45,7 +45,7 @@ def segment_reaches(
     if len(t) != len(speed):
         raise InputError(f"{len(t)} timestamps for {len(speed)} speed samples")
     n = len(speed)
-    cores = runs(speed >= settings.entry_speed_m_s)
+    cores = true_spans(speed >= settings.entry_speed_m_s)
     # Tallest first: its extent claims every core inside it; smaller movements are clipped at
     # the boundaries of those already claimed, so movements never overlap.
     order = sorted(cores, key=lambda c: -float(np.max(speed[c[0] : c[1]])))

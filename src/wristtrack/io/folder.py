@@ -157,6 +157,10 @@ class FolderRecording(Recording):
     def __len__(self) -> int:
         return self._length
 
+    def timestamps(self) -> np.ndarray:
+        """Every frame's timestamp (s) as frames.csv lists it; no image is read."""
+        return np.array([row.timestamp for row in self._rows()], dtype=float)
+
     def _rows(self) -> Iterator[_Row]:
         where = str(self.frames_csv)
         try:

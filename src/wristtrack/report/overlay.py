@@ -8,7 +8,6 @@ Y green, Z blue) and a status line.
 
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 
@@ -37,23 +36,20 @@ BLOB_RADIUS = 9
 
 
 def nominal_fps(recording, default: float = 30.0) -> float:
-    """The recording's frame rate for the video: its own when it has one, else the median
-    frame interval of a recording folder's frames.csv, else ``default``."""
+    """The recording's frame rate for the video: its own when it has one, else 1 / the median
+    frame interval of its timestamps (a recording folder), else ``default``."""
     fps = getattr(recording, "fps", None)
     if isinstance(fps, int | float) and math.isfinite(fps) and fps > 0:
         return float(fps)
-    frames_csv = getattr(recording, "frames_csv", None)
-    if frames_csv is not None:
+    timestamps = getattr(recording, "timestamps", None)  # a recording folder's, from frames.csv
+    if callable(timestamps):
         try:
-            with open(frames_csv, newline="", encoding="utf-8-sig") as fh:
-                rows = list(csv.reader(fh))[1:]
-            t = np.array([float(r[0]) for r in rows if r and r[0].strip()])
-            dt = np.diff(t)
-            dt = dt[dt > 0]
-            if dt.size:
-                return float(1.0 / np.median(dt))
-        except (OSError, ValueError, IndexError):
-            pass  # frames.csv problems are the reader's to report; the video just uses default
+            dt = np.diff(timestamps())
+        except (InputError, OSError):
+            return default  # frames.csv problems are the reader's to report
+        dt = dt[dt > 0]
+        if dt.size:
+            return float(1.0 / np.median(dt))
     return default
 
 
