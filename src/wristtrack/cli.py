@@ -253,7 +253,8 @@ def _compare(args: argparse.Namespace) -> int:
     from wristtrack.analysis.compare import compare, format_comparison, write_comparison
 
     result = compare(args.run_dir, args.reference, markers=args.markers, cluster=args.cluster,
-                     fit_ratio=not args.no_clock_ratio, max_lag_s=args.max_lag)
+                     fit_ratio=not args.no_clock_ratio, max_lag_s=args.max_lag,
+                     time_offset_s=args.time_offset)
     json_path, html_path = write_comparison(args.out, result)
     print(format_comparison(result.result))
     print(f"wrote {json_path} and {html_path}")
@@ -477,6 +478,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="fit the time offset only (assume both clocks run at the same rate)")
     comp.add_argument("--max-lag", type=float, metavar="S",
                       help="search the time offset within +-S seconds only")
+    comp.add_argument("--time-offset", type=float, metavar="S",
+                      help="the clocks' offset when known (synchronised systems; needed for a "
+                      "static trial): reference time = our time + S, not fitted")
     comp.set_defaults(handler=_compare)
 
     simulate = sub.add_parser("simulate", help="write a synthetic RGB-D recording with truth")

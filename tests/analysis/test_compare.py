@@ -215,3 +215,24 @@ def test_implausible_results_are_flagged():
     text = " ".join(_warnings(bad, 300))
     for phrase in ("implausible", "correlate poorly", "only 40 of 100", "only 100 of our 300"):
         assert phrase in text
+
+
+def test_a_static_trial_compares_with_a_given_time_offset(tmp_path):
+    """A still hand gives the speed cross-correlation nothing to hold on to: with the systems'
+    known offset (a hardware trigger) the registration and agreement still come out."""
+    from wristtrack.sim.motion import neutral_camera_pose, still
+
+    motion = still(3.0, angles_deg=(5.0, -10.0, 3.0), position=(0.01, 0.0, 0.0))
+    R_c0, t_c0 = neutral_camera_pose()
+    traj = sample(motion, timestamps(90, 30.0), R_c0, t_c0)
+    layout = HandLayout.default()
+    run = _run(tmp_path / "run", traj, layout)
+    ref = _reference(tmp_path / "ref.trc", motion, R_c0, t_c0, layout, traj.t[-1], 0.05)
+    with pytest.raises(InputError, match="shows no movement"):
+        compare(run, ref, markers=MAP)
+    r = compare(run, ref, markers=MAP, time_offset_s=OFFSET).result
+    assert r["time_offset_given"] and r["time_offset_s"] == OFFSET
+    assert r["clock_ratio"] == 1.0 and r["time_offset_sigma_s"] == 0.0
+    ang, mm = _transform_errors(r)
+    assert ang < 0.05 and mm < 0.05
+    assert r["pos_rmse_mm"] < 0.1 and r["warnings"] == []

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from wristtrack.analysis.compare_align import coarse_offset, speed
+from wristtrack.analysis.compare_align import CoarseAlignment, coarse_offset, speed
 from wristtrack.analysis.compare_reference import (
     Interpolator,
     ReferencePoses,
@@ -124,8 +124,11 @@ def compare(
     cluster: str | None = None,
     fit_ratio: bool = True,
     max_lag_s: float | None = None,
+    time_offset_s: float | None = None,
 ) -> Comparison:
-    """Compare a run folder with a reference recording; see the module docstring."""
+    """Compare a run folder with a reference recording; see the module docstring.
+    ``time_offset_s``: the clocks' offset when it is known (systems synchronised by a trigger):
+    no alignment is attempted, which also allows a static trial."""
     cols, summary = read_run(run_dir)
     side = (summary.get("conventions") or {}).get("side", "right")
     layout = None
@@ -138,13 +141,16 @@ def compare(
     if ok.sum() < 10:
         raise InputError(f"{run_dir}: fewer than 10 frames with a pose; nothing to compare")
 
-    # Before the registration the cluster's origin stands in for the wrist.
-    coarse = coarse_offset(t, speed(t, np.where(ok[:, None], t_ch, np.nan)), ref.times,
-                           speed(ref.times, _ref_wrist(ref, np.zeros(3))), max_lag_s)
+    if time_offset_s is None:
+        # Before the registration the cluster's origin stands in for the wrist.
+        coarse = coarse_offset(t, speed(t, np.where(ok[:, None], t_ch, np.nan)), ref.times,
+                               speed(ref.times, _ref_wrist(ref, np.zeros(3))), max_lag_s)
+    else:
+        coarse = CoarseAlignment(float(time_offset_s), float("nan"))
     interp = Interpolator(ref)
     idx = np.flatnonzero(ok)
     reg = register(t[idx], R_ch[idx], t_ch[idx], interp, coarse.offset_s,
-                   ref.kind == "cluster", fit_ratio)
+                   ref.kind == "cluster", fit_ratio, fit_offset=time_offset_s is None)
 
     # Every frame both systems saw counts in the agreement, not only those the fit kept.
     tau = reg.ref_times(t)
@@ -182,7 +188,8 @@ def compare(
         "clock_ratio": reg.ratio,
         "clock_ratio_sigma": reg.sigma["ratio"],
         "coarse_offset_s": coarse.offset_s,
-        "speed_correlation": coarse.peak,
+        "time_offset_given": time_offset_s is not None,
+        "speed_correlation": _num(coarse.peak),
         "frames_compared": int(len(k)),
         "frames_registered": int(reg.used.sum()),
         "pos_rmse_mm": rmse(pos_err),
@@ -263,7 +270,7 @@ def _warnings(result: dict[str, Any], frames_with_pose: int) -> list[str]:
     if abs(result["clock_ratio"] - 1.0) > RATIO_PLAUSIBLE:
         out.append(f"clock ratio {result['clock_ratio']:.4f} is implausible for two crystal "
                    "clocks: the alignment has probably failed (try --no-clock-ratio, --max-lag)")
-    if result["speed_correlation"] < 0.5:
+    if result["speed_correlation"] is not None and result["speed_correlation"] < 0.5:
         out.append(f"the speed profiles correlate poorly ({result['speed_correlation']:.2f}): "
                    "check that both recordings hold the same movement")
     if result["frames_registered"] < 0.8 * result["frames_compared"]:

@@ -99,10 +99,13 @@ def initial_guess(
 
 
 class _Problem:
-    def __init__(self, t, R_ch, t_ch, interp: Interpolator, cluster: bool, fit_ratio: bool,
-                 start):
+    """Parameters: rotation increment (3), translation (3), clock (``n_clock``: 0 = offset
+    fixed, 1 = offset, 2 = offset and ratio), cluster rotation increment and offset (3 + 3)."""
+
+    def __init__(self, t, R_ch, t_ch, interp: Interpolator, cluster: bool, n_clock: int,
+                 start, offset0: float):
         self.t, self.R_ch, self.t_ch, self.interp = t, R_ch, t_ch, interp
-        self.cluster, self.fit_ratio = cluster, fit_ratio
+        self.cluster, self.n_clock, self.offset0 = cluster, n_clock, offset0
         self.tm = float(np.mean(t))
         self.R0, self.X0 = start[0], start[2]
         self.sp, self.sr = np.ones(3), np.ones(3)  # residual scales per axis: mm, deg
@@ -111,14 +114,17 @@ class _Problem:
     def unpack(self, x):
         R_lc = so3_exp(x[:3]) @ self.R0
         t_lc = x[3:6]
-        a, k = x[6], (x[7] if self.fit_ratio else 0.0)
+        a = x[6] if self.n_clock else self.offset0
+        k = x[7] if self.n_clock == 2 else 0.0
         X_R, x_t = self.X0, np.zeros(3)
         if self.cluster:
-            i = 8 if self.fit_ratio else 7
+            i = 6 + self.n_clock
             X_R = self.X0 @ so3_exp(x[i : i + 3])
             x_t = x[i + 3 : i + 6]
         ratio = 1.0 + k
         offset = self.tm + a - ratio * self.tm  # tau = tm + a + ratio (t - tm)
+        if self.n_clock == 0:
+            offset = self.offset0  # as given, to the last bit
         return R_lc, t_lc, offset, ratio, X_R, x_t
 
     def errors(self, x) -> tuple[np.ndarray, np.ndarray]:
@@ -159,9 +165,11 @@ def register(
     coarse_offset_s: float,
     cluster: bool,
     fit_ratio: bool = True,
+    fit_offset: bool = True,
 ) -> Registration:
     """Joint registration and clock fit of our frames (times t (M,), poses in the camera frame)
-    to the reference, starting from the coarse offset; see the module docstring."""
+    to the reference, starting from the coarse offset; see the module docstring. Without
+    ``fit_offset`` the offset is taken as given (synchronised systems) and the ratio as 1."""
     margin = interp.usable(t + coarse_offset_s - _MARGIN_S) & interp.usable(
         t + coarse_offset_s + _MARGIN_S
     )
@@ -174,11 +182,12 @@ def register(
     t, R_ch, t_ch = t[use], R_ch[use], t_ch[use]
     R_ref, p_ref = interp(t + coarse_offset_s)
     start = initial_guess(R_ch, t_ch, R_ref, p_ref, cluster, interp.has_rotation)
-    prob = _Problem(t, R_ch, t_ch, interp, cluster, fit_ratio, start)
-    n_par = 6 + 1 + int(fit_ratio) + (6 if cluster else 0)
-    x0 = np.zeros(n_par)
+    n_clock = (1 + int(fit_ratio)) if fit_offset else 0
+    prob = _Problem(t, R_ch, t_ch, interp, cluster, n_clock, start, coarse_offset_s)
+    x0 = np.zeros(6 + n_clock + (6 if cluster else 0))
     x0[3:6] = start[1]
-    x0[6] = coarse_offset_s
+    if n_clock:
+        x0[6] = coarse_offset_s
     if cluster:
         x0[-3:] = start[3]
     iterations = 0
@@ -199,14 +208,14 @@ def register(
     sol = least_squares(prob.residuals, x0, method="trf", x_scale="jac")
     iterations += int(sol.nfev)
     R_lc, t_lc, offset, ratio, X_R, x_t = prob.unpack(sol.x)
-    sigma = _uncertainty(prob, sol, fit_ratio, cluster)
+    sigma = _uncertainty(prob, sol, cluster)
     used = np.zeros(len(use), bool)
     used[np.flatnonzero(use)[prob.rows]] = True
     return Registration(R_lc, t_lc, offset, ratio, X_R, x_t, sigma, used, iterations,
                         t_ch[prob.rows].mean(axis=0))
 
 
-def _uncertainty(prob: _Problem, sol, fit_ratio: bool, cluster: bool) -> dict[str, float]:
+def _uncertainty(prob: _Problem, sol, cluster: bool) -> dict[str, float]:
     J = sol.jac
     m, n = J.shape
     res = sol.fun
@@ -219,13 +228,14 @@ def _uncertainty(prob: _Problem, sol, fit_ratio: bool, cluster: bool) -> dict[st
     inflate = _correlation_inflation(per_frame)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * inflate
     # offset = tm + a - ratio tm = a - k tm: its variance includes the a-k covariance.
-    if fit_ratio:
+    sd_offset = sd_ratio = 0.0  # a given offset (and ratio) is exact as far as we know
+    if prob.n_clock == 2:
         g = np.zeros(n)
         g[6], g[7] = 1.0, -prob.tm
         sd_offset = float(np.sqrt(max(g @ cov @ g, 0.0)) * inflate)
         sd_ratio = float(sd[7])
-    else:
-        sd_offset, sd_ratio = float(sd[6]), 0.0
+    elif prob.n_clock == 1:
+        sd_offset = float(sd[6])
     # A rotation error moves the lab image of a far point a lot (0.1 deg = 1.1 mm at 0.65 m):
     # what matters is the error where the hand was, at the centre of the tracked positions.
     R_lc = so3_exp(sol.x[:3]) @ prob.R0
@@ -245,7 +255,7 @@ def _uncertainty(prob: _Problem, sol, fit_ratio: bool, cluster: bool) -> dict[st
         "residual_orientation_deg": float(np.linalg.norm(prob.sr)),
     }
     if cluster:
-        i = 8 if fit_ratio else 7
+        i = 6 + prob.n_clock
         out["cluster_rotation_deg"] = float(np.degrees(np.linalg.norm(sd[i : i + 3])))
         out["cluster_translation_mm"] = float(np.linalg.norm(sd[i + 3 : i + 6]) * 1e3)
     return out

@@ -130,6 +130,11 @@ def render_comparison_html(comparison: Comparison) -> str:
             f"<td>{_f(ba['bias'], 3)}</td><td>{_f(ba['loa_low'], 3)} .. "
             f"{_f(ba['loa_high'], 3)}</td><td>{_f(r['reaches'][key]['icc'], 3)}</td></tr>"
         )
+    if r.get("time_offset_given"):
+        coarse_label, coarse_note = "time offset given (--time-offset), not fitted", "-"
+    else:
+        coarse_label = "coarse offset (speed cross-correlation)"
+        coarse_note = f"peak {_f(r['speed_correlation'])}"
     notes = "".join(f"<p class=note>{e(n)}</p>"
                     for n in [*r.get("warnings", []), *r["reference"]["notes"]])
     ref = r["reference"]
@@ -146,8 +151,8 @@ wristtrack {e(__version__)}.</p>{notes}
 <tr><td class=l>clock ratio</td><td>{r['clock_ratio']:.6f}</td><td>{sig['ratio']:.1e}</td></tr>
 <tr><td class=l>registration rotation / translation</td><td>see comparison.json</td>
 <td>{sig['rotation_deg']:.3f} deg / {sig['translation_mm']:.2f} mm</td></tr>
-<tr><td class=l>coarse offset (speed cross-correlation)</td><td>{r['coarse_offset_s'] * 1e3:.1f}
-ms</td><td>peak {r['speed_correlation']:.2f}</td></tr></table>
+<tr><td class=l>{coarse_label}</td><td>{r['coarse_offset_s'] * 1e3:.1f}
+ms</td><td>{coarse_note}</td></tr></table>
 {_img(alignment_figure(s, r['time_offset_s']), 'Wrist speed of both systems after alignment')}
 <h2>Agreement</h2>
 <p>{r['frames_compared']} frames compared ({r['frames_registered']} used by the registration).
