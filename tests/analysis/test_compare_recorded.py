@@ -135,3 +135,35 @@ def test_recorded_motion_starts_and_ends_at_rest():
     assert np.linalg.norm((m.position(mid + h) - m.position(mid - h)) / (2 * h), axis=1).max() \
         > 0.05
     assert rec.meta["time_scaled"] and rec.meta["rotation_scale"] == 0.2
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--motion", str(KTK / "kinematics_tennis_serve.c3d")], "go together"),
+    (["--cluster", "RWRA,RWRB,RFIN"], "go together"),
+    (["--motion", str(KTK / "kinematics_tennis_serve.c3d"), "--cluster", "RWRA,RWRB,RFIN",
+      "--speed", "0"], "must be positive"),
+    (["--motion", str(KTK / "kinematics_racing_static.c3d"), "--cluster",
+      "GloveR1,GloveR2,GloveR3"], "complete in fewer than 4 frames"),
+])
+def test_simulate_motion_refuses_bad_options_in_one_line(tmp_path, capsys, args, message):
+    assert main(["simulate", str(tmp_path / "rec"), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert not (tmp_path / "rec").exists()
+
+
+def test_a_long_gap_in_the_chosen_segment_is_refused(tmp_path, capsys):
+    from wristtrack.io.markers.trajectories import MarkerTrajectories
+    from wristtrack.io.markers.trc import write_trc
+
+    n = 300
+    t = np.arange(n) / 100.0
+    base = np.array([[0.0, 0.0, 0.0], [0.04, 0.0, 0.0], [0.0, 0.03, 0.0]])
+    xyz = base[None] + np.column_stack([0.1 * np.sin(t), 0.02 * t, 0 * t])[:, None] + 0.5
+    xyz[100:130] = np.nan  # 0.3 s lost
+    write_trc(tmp_path / "gap.trc", MarkerTrajectories(("A", "B", "C"), np.arange(n), t, xyz,
+                                                      100.0, False, "t"), "mm")
+    argv = ["simulate", str(tmp_path / "rec"), "--motion", str(tmp_path / "gap.trc"),
+            "--cluster", "A,B,C", "--motion-start", "0.5", "--motion-duration", "1.5"]
+    assert main(argv) == 2
+    assert "0.31 s gap at 0.99 s" in capsys.readouterr().err
