@@ -188,15 +188,16 @@ class OpenNIRecording(Recording):
     def _release(self) -> None:
         for stream in self._streams:
             try:
-                stream.stop()
-                stream.close()
+                stream.close()  # stops it first (stopping twice corrupts OpenNI2's heap)
             except Exception:
                 pass
         self._streams = []
-        try:
-            self._device.close()
-        except Exception:
-            pass
+        device, self._device = self._device, None  # closing twice crashes the library
+        if device is not None:
+            try:
+                device.close()
+            except Exception:
+                pass
 
     def close(self) -> None:
         super().close()

@@ -25,6 +25,7 @@ from wristtrack.io.base import Frame, Recording, reject_options
 INSTALL = "pip install 'wristtrack[realsense]'"
 RECORDING_SUFFIXES = (".bag", ".db3")
 FRAME_TIMEOUT_S = 5.0  # no frameset for this long: the device stalled (or was unplugged)
+POLL_S = 0.1  # waits in steps this long, so a recording's end is seen at once
 
 
 def import_pyrealsense2():
@@ -60,6 +61,19 @@ def camera_from_intrinsics(intr: Any, depth_scale: float, rs: Any) -> Camera:
     return Camera(fx=float(intr.fx), fy=float(intr.fy), cx=float(intr.ppx), cy=float(intr.ppy),
                   width=int(intr.width), height=int(intr.height),
                   depth_scale=float(depth_scale), dist=dist)
+
+
+def _already_registered(depth: Any, color: Any) -> bool:
+    """Whether depth pixels already are colour pixels: same intrinsics, identity extrinsics."""
+    a, b = depth.get_intrinsics(), color.get_intrinsics()
+    same = [a.width, a.height, a.fx, a.fy, a.ppx, a.ppy, a.model, *a.coeffs] == \
+        [b.width, b.height, b.fx, b.fy, b.ppx, b.ppy, b.model, *b.coeffs]
+    try:
+        ext = depth.get_extrinsics_to(color)
+    except RuntimeError:  # no extrinsics recorded between them: cannot tell, so align
+        return False
+    return same and np.allclose(ext.rotation, np.eye(3).ravel(), atol=1e-9) and \
+        np.allclose(ext.translation, 0.0, atol=1e-9)
 
 
 class RealSenseRecording(Recording):
@@ -113,32 +127,35 @@ class RealSenseRecording(Recording):
                 config.enable_device(serial)
             config.enable_stream(rs.stream.depth, width, height, rs.format.z16, fps)
             config.enable_stream(rs.stream.color, width, height, rs.format.bgr8, fps)
-        self._pipe = rs.pipeline()
+        self._pipe, self._config = rs.pipeline(), config
         try:
-            profile = self._pipe.start(config)
+            # Resolved, not started: streaming (or a recording's playback) starts when the
+            # frames are first iterated, so a recording plays from its first frame.
+            profile = config.resolve(rs.pipeline_wrapper(self._pipe))
         except RuntimeError as exc:  # busy device, unsupported mode, unreadable file
             raise InputError(f"{name} cannot be started: {exc}") from None
-        try:
-            device = profile.get_device()
-            if file is not None:
-                device.as_playback().set_real_time(bool(real_time))
-            streams = {s.stream_type(): s for s in profile.get_streams()}
-            if rs.stream.color not in streams:
-                raise InputError(f"{name} has no colour stream; the tracker needs colour")
-            self.has_depth = rs.stream.depth in streams
-            intr = streams[rs.stream.color].as_video_stream_profile().get_intrinsics()
-            scale = device.first_depth_sensor().get_depth_scale() if self.has_depth else 0.001
-            self.device_name = device.get_info(rs.camera_info.name)
-            if camera is None:
-                camera = camera_from_intrinsics(intr, scale, rs)
-        except Exception:
-            self._pipe.stop()
-            raise
+        device = profile.get_device()
+        streams = {s.stream_type(): s for s in profile.get_streams()}
+        if rs.stream.color not in streams:
+            raise InputError(f"{name} has no colour stream; the tracker needs colour")
+        self.has_depth = rs.stream.depth in streams
+        intr = streams[rs.stream.color].as_video_stream_profile().get_intrinsics()
+        scale = device.first_depth_sensor().get_depth_scale() if self.has_depth else 0.001
+        self.device_name = device.get_info(rs.camera_info.name)
+        if camera is None:
+            camera = camera_from_intrinsics(intr, scale, rs)
+        registered = self.has_depth and _already_registered(
+            streams[rs.stream.depth].as_video_stream_profile(),
+            streams[rs.stream.color].as_video_stream_profile())
+        self._real_time = bool(real_time)
+        self._playback = None
+        self._running = False
         super().__init__(name, camera, hand)
         self.file = file
         self.max_frames = max_frames
-        self._align = rs.align(rs.stream.color) if self.has_depth else None
-        self._running = True
+        # A D405 (colour from the depth imager) or a recording of aligned frames needs no
+        # alignment; rs.align would only punch rounding holes into it.
+        self._align = rs.align(rs.stream.color) if self.has_depth and not registered else None
 
     def __len__(self) -> int:
         raise TypeError(f"{self.source}: a RealSense stream has no length")
@@ -148,17 +165,32 @@ class RealSenseRecording(Recording):
             raise InputError(f"{self.source}: a RealSense stream cannot start at frame {start}")
         index, t0 = 0, None
         last_number = None
+        try:
+            profile = self._pipe.start(self._config)
+        except RuntimeError as exc:
+            raise InputError(f"{self.source} cannot be started: {exc}") from None
+        self._running = True
+        if self.file is not None:
+            self._playback = profile.get_device().as_playback()
+            self._playback.set_real_time(self._real_time)
+        quiet = 0.0
         while self._running and (self.max_frames is None or index < self.max_frames):
-            ok, frames = self._pipe.try_wait_for_frames(int(FRAME_TIMEOUT_S * 1000))
+            ok, frames = self._pipe.try_wait_for_frames(int(POLL_S * 1000))
             if not ok:
-                if self.file is not None and index > 0:
-                    return  # a recording ends by going quiet
-                raise InputError(f"{self.source} delivered no frame for {FRAME_TIMEOUT_S:g} s; "
-                                 "check the cable (USB 3) and that no other program uses it")
+                if self._playback is not None and \
+                        self._playback.current_status() == self._rs.playback_status.stopped:
+                    return  # the recording has ended
+                quiet += POLL_S
+                if quiet >= FRAME_TIMEOUT_S:
+                    raise InputError(f"{self.source} delivered no frame for "
+                                     f"{FRAME_TIMEOUT_S:g} s; check the cable (USB 3) and that "
+                                     "no other program uses it")
+                continue
+            quiet = 0.0
             if self._align is not None:
                 frames = self._align.process(frames)
             color = frames.get_color_frame()
-            depth = frames.get_depth_frame() if self._align is not None else None
+            depth = frames.get_depth_frame() if self.has_depth else None
             if not color:
                 continue  # a depth-only frameset (streams start at different moments)
             number = color.get_frame_number()

@@ -285,7 +285,7 @@ def track_live(
                 try:
                     result = tracker.step(det)
                 except InputError:  # e.g. a timestamp going backwards: skip this frame
-                    writer.write(_skipped_row(frame.index, frame.timestamp, det.count))
+                    writer.write(_skipped_row(frame.index, frame.timestamp, det.count, "skipped"))
                     log.bad.append(frame.index)
                     continue
                 if result.frame != frame.index:  # after dropped frames: the source's numbers
