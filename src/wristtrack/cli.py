@@ -25,8 +25,8 @@ def _demo(args: argparse.Namespace) -> int:
 def _config(args: argparse.Namespace):
     from wristtrack.tracking.tracker import TrackerConfig
 
-    if args.model == "paper":
-        return TrackerConfig.paper()
+    if args.model in ("paper", "paper_rpy"):
+        return TrackerConfig.paper(model=args.model)
     return TrackerConfig(association=args.association, use_depth=not args.no_depth)
 
 

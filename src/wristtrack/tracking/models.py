@@ -125,7 +125,7 @@ class PaperModel:
     """State x = [T (3), v (3), Z-Y-Z Euler angles (3)]; Euclidean tangent (9).
 
     Noise (6) = (linear acceleration n_v, angular velocity n_w). The Euler angles are the
-    paper's parametrisation of R relative to W0.
+    paper's parametrisation of R relative to W0 (``sequence``, intrinsic).
     """
 
     dim = 9
@@ -133,13 +133,15 @@ class PaperModel:
     position = slice(0, 3)
     noise_dim = 6
     name = "paper"
+    sequence = PAPER_EULER_SEQUENCE
+    proper = True  # a proper Euler sequence (first axis = last): singular at middle angle 0
 
     def __init__(self, noise: ProcessNoise = ProcessNoise()):
         self.noise = noise
 
-    @staticmethod
-    def initial_state(R: np.ndarray, p: np.ndarray, v=None, w=None) -> np.ndarray:
-        euler = euler_from_matrix(np.asarray(R), PAPER_EULER_SEQUENCE)
+    @classmethod
+    def initial_state(cls, R: np.ndarray, p: np.ndarray, v=None, w=None) -> np.ndarray:
+        euler = euler_from_matrix(np.asarray(R), cls.sequence)
         return np.concatenate((p, np.zeros(3) if v is None else v, euler))
 
     def retract(self, x: np.ndarray, xi: np.ndarray) -> np.ndarray:
@@ -147,7 +149,7 @@ class PaperModel:
 
     def lift(self, x: np.ndarray, X: np.ndarray) -> np.ndarray:
         d = X - x
-        d[:, 6:] = continuous_euler(X[:, 6:], x[6:]) - x[6:]
+        d[:, 6:] = continuous_euler(X[:, 6:], x[6:], self.proper) - x[6:]
         return d
 
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
@@ -155,16 +157,16 @@ class PaperModel:
         out = np.empty_like(X)
         out[:, :3] = X[:, :3] + X[:, 3:6] * dt
         out[:, 3:6] = X[:, 3:6] + n_v * dt
-        R = matrix_from_euler(X[:, 6:], PAPER_EULER_SEQUENCE) @ so3_exp(n_w * dt)
-        out[:, 6:] = continuous_euler(euler_from_matrix(R, PAPER_EULER_SEQUENCE), X[:, 6:])
+        R = matrix_from_euler(X[:, 6:], self.sequence) @ so3_exp(n_w * dt)
+        out[:, 6:] = continuous_euler(euler_from_matrix(R, self.sequence), X[:, 6:], self.proper)
         return out
 
     def process_noise(self, dt: float) -> np.ndarray:
         return np.diag(np.repeat([self.noise.linear_accel / dt, self.noise.angular_rate / dt], 3))
 
-    @staticmethod
-    def pose(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return matrix_from_euler(X[:, 6:], PAPER_EULER_SEQUENCE), X[:, :3]
+    @classmethod
+    def pose(cls, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return matrix_from_euler(X[:, 6:], cls.sequence), X[:, :3]
 
     @staticmethod
     def velocities(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +186,21 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def continuous_euler(euler: np.ndarray, near: np.ndarray) -> np.ndarray:
-    """Of the two Z-Y-Z triples of each rotation, (a, b, c) and (a + pi, -b, c + pi), the one
-    closest to ``near``, unwrapped to it: keeps the Euler state continuous in time.
+class PaperRPYModel(PaperModel):
+    """The paper's model with roll-pitch-yaw angles, the convention its figure legend implies:
+    intrinsic Z-Y-X (yaw about Z = deviation, pitch about Y = flexion, roll about X =
+    pronation), singular at pitch +-90 deg, far from the neutral start pose (issue 12 item 4:
+    the paper at its best, beside Z-Y-Z)."""
+
+    name = "paper_rpy"
+    sequence = "ZYX"
+    proper = False
+
+
+def continuous_euler(euler: np.ndarray, near: np.ndarray, proper: bool = True) -> np.ndarray:
+    """Of the two triples of each rotation, (a, b, c) and (a + pi, -b, c + pi) for a proper
+    sequence such as Z-Y-Z ((a + pi, pi - b, c + pi) for a Tait-Bryan one such as Z-Y-X), the
+    one closest to ``near``, unwrapped to it: keeps the Euler state continuous in time.
 
     Without this the state jumps by pi whenever the middle angle crosses 0 (every flexion
     through neutral), which no filter survives; with it the paper's model is as good as an
@@ -194,10 +208,10 @@ def continuous_euler(euler: np.ndarray, near: np.ndarray) -> np.ndarray:
     is observable).
     """
     other = euler + np.array([np.pi, 0.0, np.pi])
-    other[..., 1] = -euler[..., 1]
+    other[..., 1] = -euler[..., 1] if proper else np.pi - euler[..., 1]
     d1, d2 = _wrap(euler - near), _wrap(other - near)
     pick = (d2 * d2).sum(-1) < (d1 * d1).sum(-1)
     return near + np.where(pick[..., None], d2, d1)
 
 
-MODELS = {"default": ConstantRateModel, "paper": PaperModel}
+MODELS = {"default": ConstantRateModel, "paper": PaperModel, "paper_rpy": PaperRPYModel}

@@ -81,7 +81,8 @@ class TrackerConfig:
         """
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
-        return cls(model="paper", association="paper", use_depth=False, **kw)
+        kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles
+        return cls(association="paper", use_depth=False, **kw)
 
 
 @dataclass
