@@ -431,6 +431,10 @@ def main(argv: list[str] | None = None) -> int:
     robust = robustness_sections(cache, seeds, n_frames=120 if quick else None,
                                  findings=findings)
     batch = _batch_section(findings, quick)
+    from benchmarks.live import SCENARIOS as LIVE_SCENARIOS
+    from benchmarks.live import bench_live, live_section
+
+    live = live_section(bench_live(cache, ("reach",) if quick else LIVE_SCENARIOS))
     from benchmarks.validation import validation_section
 
     validation = validation_section(cache, quick, findings)
@@ -477,6 +481,7 @@ def main(argv: list[str] | None = None) -> int:
         *rendered_compare,
         *robust,
         *batch,
+        *live,
         *validation,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)

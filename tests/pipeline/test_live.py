@@ -192,3 +192,21 @@ def test_record_refuses_an_existing_recording(reach, tmp_path, capsys):
                  "--record", str(reach)]) == 2
     err = capsys.readouterr().err.strip()
     assert "already exists and is not empty" in err and "\n" not in err
+
+
+def test_benchmark_section_judges_the_plain_runs_against_the_target():
+    from benchmarks.live import live_section
+
+    def run(p95, dropped=0, fraction=1.0):
+        return {"frames": 100, "dropped": dropped, "tracked": 100, "tracked_fraction": fraction,
+                "latency_p50_ms": 5.0, "latency_p95_ms": p95, "latency_max_ms": 40.0,
+                "over_frame_period": 1, "replay_late_frames": 0, "recorded": None,
+                "record_lost": None}
+
+    result = {"cores_usable": 2, "load_average_before": 1.0, "load_average_after": 1.0,
+              "runs": {"reach": run(20.0), "reach --record": run(40.0, dropped=3)}}
+    text = "\n".join(live_section(result))
+    assert "| reach | 100 | 100.0 % | 0 | 5.0 | 20.0 | 40.0 | 1 |" in text
+    assert "(meets the target); with --record: worst p95 40.0 ms, 3 dropped" in text
+    result["runs"]["flexion"] = run(20.0, fraction=0.98)
+    assert "**misses**" in "\n".join(live_section(result))
