@@ -438,6 +438,9 @@ def main(argv: list[str] | None = None) -> int:
     from benchmarks.validation import validation_section
 
     validation = validation_section(cache, quick, findings)
+    from benchmarks.paper_baseline import paper_baseline_section
+
+    paper_baseline = paper_baseline_section(quick, findings)
     command = "python -m benchmarks.run " + ("--quick" if quick else f"--seeds {args.seeds}")
     if args.no_soak:
         command += " --no-soak"
@@ -483,6 +486,7 @@ def main(argv: list[str] | None = None) -> int:
         *batch,
         *live,
         *validation,
+        *paper_baseline,
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(text))

@@ -1,0 +1,172 @@
+"""An honest paper baseline (issue 12 item 4, first part): the paper's filter at its best.
+
+The paper's configuration (`--model paper`: Euler-angle state, per-blob association, depth only
+at initialisation) has one process-noise value nobody tuned, and a Z-Y-Z Euler state that is
+singular at the neutral start pose. Here:
+
+- both Euler conventions: Z-Y-Z (`paper`) and the roll-pitch-yaw its figure legend implies
+  (`paper_rpy`, intrinsic Z-Y-X, singular at pitch +-90 deg);
+- the process noise (orientation random walk and linear acceleration densities) chosen by a
+  grid sweep on *tuning* recordings that are not the test recordings: measurement-level
+  simulations of recorded hand motion (../shared/realdata: a tennis serve's ball toss, the two
+  wheelchair-racing gloves slowed 0.3x and shrunk 0.2x);
+- then scored on the test recordings, the scripted scenarios (seeds 0..), beside the untuned
+  value and our default tracker.
+
+Not yet here (item 4's remainder): the paper's filter on rendered recordings through our
+detector, and the paper end to end (its skin ROI + Bhattacharyya detector without our
+refinements, initialised from manual labels).
+
+``paper_baseline_section(quick)`` returns Markdown lines; ``python -m benchmarks.paper_baseline``
+prints them.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from wristtrack.sim.detections import acceptance_noise, simulate_detections
+from wristtrack.sim.motion import SCENARIOS
+from wristtrack.sim.scenario_run import score_run, track_scenario
+from wristtrack.tracking.models import ProcessNoise
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
+
+KTK = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "kineticstoolkit"
+SLOW = {"speed": 0.3, "position_scale": 0.2, "rotation_scale": 0.2}
+TUNING = (
+    ("tennis toss", "kinematics_tennis_serve.c3d", "RWRA,RWRB,RFIN",
+     {"start_s": 1.0, "duration_s": 1.6}),
+    ("racing glove R", "kinematics_racing_propulsion.c3d", "GloveR1,GloveR2,GloveR3",
+     {"start_s": 0.0, "duration_s": 1.0, **SLOW}),
+    ("racing glove L", "kinematics_racing_propulsion.c3d", "GloveL1,GloveL2,GloveL3",
+     {"start_s": 2.0, "duration_s": 1.0, **SLOW}),
+)
+ANGULAR_RATE = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0)  # (rad/s)^2 s
+LINEAR_ACCEL = (0.03, 0.1, 0.3, 1.0)  # (m/s^2)^2 s
+MODELS = {"paper": "Z-Y-Z (paper)", "paper_rpy": "roll-pitch-yaw (paper_rpy)"}
+
+
+def tuning_runs(seed: int = 100):
+    """(name, truth, camera, layout, frames) of each tuning recording at measurement level."""
+    from wristtrack.sim.recorded import load_recorded_motion, recorded_scene
+
+    out = []
+    for k, (name, file, cluster, options) in enumerate(TUNING):
+        rec = load_recorded_motion(KTK / file, cluster.split(","), **options)
+        scene = recorded_scene(rec, 30.0)
+        truth = scene.trajectory()
+        rng = np.random.default_rng(seed + k)
+        frames = simulate_detections(truth, scene.camera, scene.layout,
+                                     acceptance_noise(len(truth.t)), rng)
+        out.append((name, truth, scene.camera, scene.layout, frames))
+    return out
+
+
+def _score(config: TrackerConfig, run) -> tuple[float, float, int]:
+    name, truth, camera, layout, frames = run
+    tracker = Tracker(camera, layout, config)
+    result = score_run(name, truth, frames, [tracker.step(f.detections) for f in frames])
+    e = result.errors
+    return e.orientation_rmse_deg, e.position_rmse_mm, result.lost_frames
+
+
+def sweep(model: str, runs, rates=ANGULAR_RATE, accels=LINEAR_ACCEL) -> dict:
+    """Mean tuning orientation / position RMSE per (angular_rate, linear_accel); NaN-safe."""
+    table = {}
+    for q, a in itertools.product(rates, accels):
+        config = TrackerConfig.paper(model=model,
+                                     process=ProcessNoise(angular_rate=q, linear_accel=a))
+        scores = np.array([_score(config, run) for run in runs], dtype=float)
+        table[(q, a)] = (float(np.mean(scores[:, 0])), float(np.mean(scores[:, 1])),
+                         int(scores[:, 2].sum()))
+    return table
+
+
+def _best(table: dict) -> tuple[float, float]:
+    """The setting with the lowest mean orientation RMSE (ties: the lower position RMSE)."""
+    return min(table, key=lambda k: (np.nan_to_num(table[k][0], nan=1e9), table[k][1]))
+
+
+def test_scores(config: TrackerConfig, seeds) -> dict[str, tuple[float, float, float]]:
+    """Per scenario: mean orientation RMSE (deg), position RMSE (mm), failure rate."""
+    out = {}
+    for name in SCENARIOS:
+        runs = [track_scenario(name, config, seed=s) for s in seeds]
+        out[name] = (float(np.mean([r.errors.orientation_rmse_deg for r in runs])),
+                     float(np.mean([r.errors.position_rmse_mm for r in runs])),
+                     float(np.mean([r.errors.failure_rate for r in runs])))
+    return out
+
+
+def paper_baseline_section(quick: bool = False, findings: dict | None = None) -> list[str]:
+    if not KTK.is_dir():
+        return ["## The paper at its best", "", f"Skipped: {KTK} not found.", ""]
+    runs = tuning_runs()
+    rates = ANGULAR_RATE[1::2] if quick else ANGULAR_RATE
+    accels = LINEAR_ACCEL[1:3] if quick else LINEAR_ACCEL
+    seeds = (0,) if quick else (0, 1, 2)
+    default_noise = ProcessNoise()
+    sweeps = {m: sweep(m, runs, rates, accels) for m in MODELS}
+    best = {m: _best(t) for m, t in sweeps.items()}
+    lines = [
+        "## The paper at its best (issue 12 item 4, first part)",
+        "",
+        "The paper's configuration (Euler state, per-blob association, depth only at "
+        "initialisation) with its process noise chosen by a sweep on tuning recordings "
+        "(measurement-level simulations of recorded motion: "
+        + ", ".join(name for name, *_ in TUNING)
+        + f"; seeds 100-102) that are not the test recordings (the scripted scenarios, seeds "
+        f"{list(seeds)}). Untuned: angular_rate {default_noise.angular_rate}, linear_accel "
+        f"{default_noise.linear_accel}.",
+        "",
+        "### Sweep on the tuning recordings (mean orientation RMSE, deg; position RMSE, mm)",
+        "",
+        "| angular_rate \\ linear_accel | " + " | ".join(
+            f"{MODELS[m].split(' (')[0]} {a}" for m in MODELS for a in accels) + " |",
+        "|---|" + "---|" * (len(MODELS) * len(accels)),
+    ]
+    for q in rates:
+        cells = []
+        for m in MODELS:
+            for a in accels:
+                rot, pos, _ = sweeps[m][(q, a)]
+                mark = " **best**" if best[m] == (q, a) else ""
+                cells.append(f"{rot:.2f} / {pos:.1f}{mark}")
+        lines.append(f"| {q} | " + " | ".join(cells) + " |")
+    spread = {m: np.nanmax([v[0] for v in t.values()]) / np.nanmin([v[0] for v in t.values()])
+              for m, t in sweeps.items()}
+    lines += [
+        "",
+        "Across the grid the tuning orientation RMSE varies "
+        + ", ".join(f"{spread[m]:.1f}x ({MODELS[m]})" for m in MODELS) + ".",
+        "",
+        "### Test recordings (scripted scenarios; orientation RMSE deg / position RMSE mm / "
+        "share of frames beyond 10 deg or 20 mm)",
+        "",
+        "| configuration | " + " | ".join(SCENARIOS) + " |",
+        "|---|" + "---|" * len(SCENARIOS),
+    ]
+    configs = {"default tracker (ours)": TrackerConfig()}
+    for m, label in MODELS.items():
+        q, a = best[m]
+        configs[f"{label}, untuned"] = TrackerConfig.paper(model=m)
+        configs[f"{label}, tuned (angular_rate {q}, linear_accel {a})"] = TrackerConfig.paper(
+            model=m, process=replace(default_noise, angular_rate=q, linear_accel=a))
+    results = {}
+    for label, config in configs.items():
+        results[label] = test_scores(config, seeds)
+        lines.append(f"| {label} | " + " | ".join(
+            f"{r:.2f} / {p:.1f} / {f:.0%}" for r, p, f in results[label].values()) + " |")
+    if findings is not None:
+        findings["paper_baseline"] = {"best": best, "results": results}
+    return [*lines, ""]
+
+
+if __name__ == "__main__":
+    import sys
+
+    print("\n".join(paper_baseline_section(quick="--quick" in sys.argv)))
