@@ -6,6 +6,7 @@ import gc
 import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -183,6 +184,32 @@ def test_realsense_recording_reads_back_frames_intrinsics_and_depth_scale(reach,
         np.testing.assert_array_equal(got.bgr, want.bgr)
         # aligned to colour by the SDK; with identical intrinsics and no offset it is the same
         np.testing.assert_array_equal(got.depth, want.depth)
+
+
+BAG = Path(__file__).parent / "data" / "realsense_sdk256.bag"  # see data/make_realsense_bag.py
+
+
+def test_realsense_viewer_bag_written_by_an_older_sdk():
+    """A ROS 1 .bag, as RealSense Viewer and SDK <= 2.56 write them, written by SDK 2.56's own
+    recorder from a software device whose every pixel is known (make_realsense_bag.py)."""
+    _rs()
+    with open_live(f"realsense:{BAG}") as rec:
+        cam = rec.camera
+        frames = list(rec.frames())
+    assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height) == (50.5, 51.25, 31.5, 23.75,
+                                                                     64, 48)
+    np.testing.assert_allclose(cam.dist, (0.1, -0.2, 0.001, 0.002, 0.01), atol=1e-7)
+    assert cam.depth_scale == pytest.approx(1e-4, rel=1e-6)
+    assert len(frames) >= 6  # of 8 (the recorder misses the first)
+    r, c = np.mgrid[0:48, 0:64]
+    first = int(frames[0].bgr[0, 0, 0])
+    for k, frame in enumerate(frames):
+        i = first + k  # consecutive: none lost in playback
+        np.testing.assert_array_equal(frame.bgr[..., 0], i)
+        np.testing.assert_array_equal(frame.bgr[..., 1], r + 10)
+        np.testing.assert_array_equal(frame.bgr[..., 2], c)
+        np.testing.assert_array_equal(frame.depth, 1000 + 10 * i + r + c)
+        assert frame.timestamp == pytest.approx(k / 30, abs=1e-6)
 
 
 def test_realsense_distortion_is_read_from_the_recording(short, tmp_path):
