@@ -16,7 +16,6 @@ output folder you name).
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import io
 import json
@@ -33,7 +32,6 @@ import numpy as np
 from wristtrack import __version__
 from wristtrack.errors import InputError, WristtrackError
 from wristtrack.io.atomic import write_bytes_atomic
-from wristtrack.tracking.tracker import Tracker
 
 CHECKPOINT_FILE = ".checkpoint.pkl"
 CHECKPOINT_FRAMES = 300  # default: a checkpoint at least every this many frames ...
@@ -162,21 +160,13 @@ class _Pickler(pickle.Pickler):
 
     def __init__(self, fh: io.BytesIO) -> None:
         super().__init__(fh, protocol=pickle.HIGHEST_PROTOCOL)
-        self._keep: list[Any] = []  # temporaries stay alive while the pickler memoises by id
 
     def reducer_override(self, obj: Any) -> Any:
         # cv2.Mat pickles as a plain array and forgets wrap_channels (a 3-D lookup table would
         # come back as a 2-D image with 32 channels).
         if type(obj) is cv2.Mat:
             return _mat, (np.asarray(obj).copy(), obj.wrap_channels)
-        # The tracker's compiled step (numba) does not come back from a pickle working: its
-        # helpers are compiled under their names only in the process that loaded it. It holds
-        # no state between frames, so it is left out and the restored tracker loads it again.
-        if type(obj) is Tracker and obj._compiled is not None:
-            light = copy.copy(obj)
-            light._compiled = light._compiled_usable = None
-            self._keep.append(light)
-            return light.__reduce_ex__(pickle.HIGHEST_PROTOCOL)
+        # (The tracker leaves its compiled step out of a pickle itself: Tracker.__getstate__.)
         return NotImplemented
 
 
