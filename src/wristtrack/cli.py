@@ -136,6 +136,8 @@ def _track_live(args: argparse.Namespace) -> int:
             print(f"live view: {view.url} (Ctrl-C ends the session)", flush=True)
         summary, live = track_live(source, args.out, _config(args), record=args.record,
                                    view=view, overlay=overlay)
+    if live.get("source_error"):
+        print(f"wristtrack track: the camera stopped: {live['source_error']}", file=sys.stderr)
     frames, lat = live["frames"], live["latency_ms"]
     print(f"tracked {summary['frames']['tracked']} of {frames['total']} frames "
           f"({frames['dropped']} dropped); latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} "

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from wristtrack.cli import main
+from wristtrack.errors import InputError
 from wristtrack.io.base import Recording
 from wristtrack.io.folder import FolderRecording
 from wristtrack.io.poses import read_poses
@@ -210,3 +211,25 @@ def test_benchmark_section_judges_the_plain_runs_against_the_target():
     assert "(meets the target); with --record: worst p95 40.0 ms, 3 dropped" in text
     result["runs"]["flexion"] = run(20.0, fraction=0.98)
     assert "**misses**" in "\n".join(live_section(result))
+
+
+class Unplugged(Burst):
+    """A camera that stops with an error after ``after`` frames (a cable pulled)."""
+
+    def __init__(self, folder, after):
+        super().__init__(folder, after)
+
+    def _frames(self, start=0):
+        for frame in self._frames_list:
+            time.sleep(1 / 30)
+            yield frame
+        raise InputError("camera test: device disconnected")
+
+
+def test_a_camera_that_stops_ends_the_session_with_its_reason(reach, tmp_path):
+    summary, live = track_live(Unplugged(reach, 8), tmp_path / "run")
+    assert live["ended_by"] == "source error"
+    assert live["source_error"] == "camera test: device disconnected"
+    assert live["frames"]["total"] == 8 == len(read_poses(tmp_path / "run" / "poses.csv")["frame"])
+    with pytest.raises(InputError, match="device disconnected"):  # before any frame: an error
+        track_live(Unplugged(reach, 0), tmp_path / "run0")
