@@ -27,6 +27,9 @@ PALM_THICKNESS = 0.03
 _FINGER_SCALE = (0.95, 1.0, 0.97, 0.8)
 _REST_CURL = (12.0, 20.0, 12.0)
 _FLEX_SHARE = (1.0, 1.1, 0.75)
+# Arched palm: the hulls stay this far below the markers, each marker on a round pad.
+_PAD_HEIGHT = 0.0025
+_PAD_RADIUS = 0.0078
 
 
 @dataclass(frozen=True)
@@ -88,32 +91,40 @@ def _flat_palm(p: np.ndarray) -> tuple[list[tuple[np.ndarray, ...]], list, list]
     return [palm], [albedo], [part]
 
 
-def _arched_palm(p: np.ndarray) -> tuple[list[tuple[np.ndarray, ...]], np.ndarray, np.ndarray]:
-    """Two convex solids over a flat underside, each the hull of 13 mm discs at their markers'
-    heights: the back of the hand (WRIST, MCP2..MCP5 and the wrist's width) and the thenar
-    side around CMC1. One hull cannot carry a thumb base lower than the line from the wrist to
-    the knuckles (it would be buried under the hull), two can, with a step between them."""
+def _arched_palm(p: np.ndarray) -> tuple[list[tuple[np.ndarray, ...]], list, list]:
+    """Convex solids over a flat underside: the back of the hand (the hull of 13 mm discs
+    around WRIST, MCP2..MCP5 and the wrist's width), the thenar side around CMC1, both kept
+    _PAD_HEIGHT below the markers, and a low round pad under each marker whose top is exactly at
+    the marker's height. A hull of discs at different heights would bury a marker that lies
+    below the hull of its neighbours (the thumb base, the ulnar knuckles) by a millimetre or
+    more, and its depth would then read the skin above it, not the marker."""
     ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     ring = 0.013 * np.column_stack([np.cos(ang), np.sin(ang)])
     thumb = 1.0 if p[1, 1] >= 0 else -1.0
     bottom = p[:, 2].min() - PALM_THICKNESS
 
-    def discs(idx, extra):
+    def hull(idx: list[int], extra: list[list[float]]) -> np.ndarray:
         top = np.vstack([np.column_stack([p[k, :2] + ring, np.full(12, p[k, 2])]) for k in idx]
-                        + [extra])
+                        + [np.array(extra)])
+        top[:, 2] -= _PAD_HEIGHT
         return np.vstack([top, np.column_stack([top[:, :2], np.full(len(top), bottom)])])
 
     # The back's thumb-side wrist corner is kept clear of the CMC1 marker's disc.
-    back = discs([0, 2, 3, 4, 5], [[-0.024, 0.020 * thumb, p[0, 2]], [-0.024, -0.027 * thumb,
-                                                                        p[0, 2]]])
-    thenar = discs([1], [[-0.024, 0.027 * thumb, p[1, 2]]])
+    back = hull([0, 2, 3, 4, 5], [[-0.024, 0.020 * thumb, p[0, 2]],
+                                  [-0.024, -0.027 * thumb, p[0, 2]]])
+    thenar = hull([1], [[-0.024, 0.027 * thumb, p[1, 2]]])
     planes, albedo, part = [], [], []
     for pts in (back, thenar):
-        hull = ConvexHull(pts)
-        eq = np.unique(np.round(hull.equations, 9), axis=0)  # coplanar triangles: one plane
-        normals = eq[:, :3]
-        planes.append((normals, -eq[:, 3], pts[hull.vertices]))
-        alb = np.tile(SKIN, (len(eq), 1))
+        h = ConvexHull(pts)
+        eq = np.unique(np.round(h.equations, 9), axis=0)  # coplanar triangles: one plane
+        planes.append((eq[:, :3], -eq[:, 3], pts[h.vertices]))
+    disc = _PAD_RADIUS * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 16, endpoint=False)),
+                                          np.sin(np.linspace(0, 2 * np.pi, 16, endpoint=False))])
+    for k in range(6):
+        n, d, v = prism(p[k, :2] + disc, p[k, 2], p[k, 2] - 2 * _PAD_HEIGHT)
+        planes.append((n, d, v))
+    for normals, _, _ in planes:
+        alb = np.tile(SKIN, (len(normals), 1))
         alb[normals[:, 2] < -0.9] = PALM_SIDE
         albedo.append(alb)
         part.append(np.where(normals[:, 2] > 0.5, DORSUM, HAND).astype(np.uint8))
