@@ -440,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     validation = validation_section(cache, quick, findings)
     from benchmarks.paper_baseline import paper_baseline_section
 
-    paper_baseline = paper_baseline_section(quick, findings)
+    paper_baseline = paper_baseline_section(quick, findings, cache)
     command = "python -m benchmarks.run " + ("--quick" if quick else f"--seeds {args.seeds}")
     if args.no_soak:
         command += " --no-soak"
