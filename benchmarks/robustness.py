@@ -35,6 +35,9 @@ CONDITIONS: dict[str, dict[str, Any]] = {
     "clean": {},
     **{e: {"effects": [e]} for e in EFFECTS if e != "left_hand"},
     "left hand": {"hand_side": "left"},
+    # Without hand.json the layout is estimated at the first fix: an arched palm, a left hand.
+    "nonplanar, no hand.json": {"effects": ["nonplanar"], "write_hand": False},
+    "left hand, no hand.json": {"hand_side": "left", "write_hand": False},
     "all (preset real)": {"effects": list(PRESET_REAL)},
     "all, left hand": {"effects": list(PRESET_REAL), "hand_side": "left"},
     "all, no hand.json": {"effects": list(PRESET_REAL), "write_hand": False},
