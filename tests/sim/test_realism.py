@@ -395,3 +395,14 @@ def test_preset_real_through_the_cli_and_bad_effects(tmp_path, capsys):
         make_scene("deviation", hand_side="both")
     with pytest.raises(SystemExit):  # argparse: one line naming the choices, exit 2
         main(["simulate", str(tmp_path / "x"), "--hand-side", "middle"])
+
+
+def test_h264_without_pyav_is_one_clear_line_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "av", None)  # import av now fails as if not installed
+    out = tmp_path / "h264"
+    assert main(["simulate", str(out), "--h264", "--n-frames", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "pip install 'wristtrack[video]'" in err
+    assert not out.exists()

@@ -8,24 +8,32 @@ stream can be written frame by frame; the rate control is x264's default CRF 23,
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 
 from wristtrack.errors import ConfigError
 from wristtrack.sim import realism
 
 
+def require_pyav() -> ModuleType:
+    """PyAV, or a ConfigError saying how to install it (before anything is written)."""
+    try:
+        import av
+    except ImportError:
+        raise ConfigError(
+            "the h264 effect needs PyAV: pip install 'wristtrack[video]' (or pip install av)"
+        ) from None
+    return av
+
+
 class H264RoundTrip:
     """Encode and decode frames one at a time through libx264 (PyAV)."""
 
     def __init__(self, width: int, height: int, fps: float):
-        try:
-            import av
-        except ImportError:
-            raise ConfigError(
-                "the h264 effect needs PyAV: pip install 'wristtrack[video]' (or pip install av)"
-            ) from None
         from fractions import Fraction
 
+        av = require_pyav()
         self._av = av
         enc = av.CodecContext.create("libx264", "w")
         enc.width, enc.height = width, height

@@ -18,6 +18,7 @@ from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError
 from wristtrack.hand import HandLayout
 from wristtrack.sim import realism
+from wristtrack.sim.codec import require_pyav
 from wristtrack.sim.motion import (
     Motion,
     Trajectory,
@@ -235,6 +236,8 @@ def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
         names.add("left_hand")
     if not names:
         return scene
+    if "h264" in names:
+        require_pyav()  # fail before a recording folder is created
     layout, camera, exposure = scene.layout, scene.camera, scene.exposure
     if "left_hand" in names:
         layout = realism.left(layout)
