@@ -22,7 +22,7 @@ def depth_sigma(
 
     Plain arithmetic on scalars or arrays, so the compiled tracker step can compile it too.
     """
-    s = coeff * z * z
+    s = coeff * (z * z)  # z^2 first: the rounding of every former copy but the filter's own
     return np.maximum(s, floor)
 
 
