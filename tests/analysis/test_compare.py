@@ -236,3 +236,29 @@ def test_a_static_trial_compares_with_a_given_time_offset(tmp_path):
     ang, mm = _transform_errors(r)
     assert ang < 0.05 and mm < 0.05
     assert r["pos_rmse_mm"] < 0.1 and r["warnings"] == []
+
+
+def test_reference_gaps_are_left_out_not_bridged(scene, tmp_path):
+    """One marker lost for 0.4 s costs nothing (the rigid fit uses the other five); all of
+    them lost: our frames inside the gap are not compared (no interpolation across it) and
+    the planted values still come out."""
+    from wristtrack.io.markers.trc import read_trc
+
+    run, ref, traj = scene
+    data = read_trc(ref)
+    xyz = data.xyz.copy()
+    lost = (data.times > 3.0) & (data.times < 3.4)
+    xyz[lost, 3] = np.nan  # our WRIST as the reference labels it
+    one = tmp_path / "one.trc"
+    write_trc(one, MarkerTrajectories(data.labels, np.arange(len(xyz)), data.times, xyz,
+                                      data.rate, False, "t"), "m")
+    full = compare(run, ref, markers=MAP).result
+    assert compare(run, one, markers=MAP).result["frames_compared"] == full["frames_compared"]
+    xyz[lost, 3:] = np.nan  # all six
+    gappy = tmp_path / "gappy.trc"
+    write_trc(gappy, MarkerTrajectories(data.labels, np.arange(len(xyz)), data.times, xyz,
+                                        data.rate, False, "t"), "m")
+    r = compare(run, gappy, markers=MAP).result
+    ours_in_gap = ((OFFSET + RATIO * traj.t > 3.0) & (OFFSET + RATIO * traj.t < 3.4)).sum()
+    assert full["frames_compared"] - r["frames_compared"] >= ours_in_gap
+    assert abs(r["time_offset_s"] - OFFSET) < 2e-4 and _transform_errors(r)[1] < 0.05
