@@ -172,6 +172,14 @@ def test_cli_writes_the_contract_keys_and_a_self_contained_page(scene, tmp_path,
     page = (out / "comparison.html").read_text()
     assert page.count("data:image/png;base64,") == 4
     assert "http://" not in page and "https://" not in page and "<link" not in page
+    import base64
+    import re
+
+    import cv2
+
+    for data in re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page):
+        img = cv2.imdecode(np.frombuffer(base64.b64decode(data), np.uint8), cv2.IMREAD_COLOR)
+        assert img is not None and img.shape[1] > 500 and img.std() > 5  # a drawn figure
 
 
 @pytest.mark.parametrize("args,message", [
