@@ -208,7 +208,7 @@ class BackgroundLearning(threading.Thread):
     def run(self) -> None:
         try:
             _learn(self._learning, *self._args)
-        except WristtrackError:
+        except Exception:  # noqa: BLE001 - half-learned models must not be handed over
             self._learning = None  # a refinement that cannot be made must not stop a session
 
     def apply_to(self, detector: MarkerDetector) -> None:
