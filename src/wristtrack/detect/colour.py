@@ -92,10 +92,12 @@ def _smoothing_matrix(n: int) -> np.ndarray:
     return np.where(np.abs(offset) <= r, k.ravel()[np.clip(offset + r, 0, 2 * r)], 0.0)
 
 
-def blob_similarities(hsv: np.ndarray, masks: np.ndarray, reference: np.ndarray) -> np.ndarray:
+def blob_similarities(hsv: np.ndarray, masks: np.ndarray, reference: np.ndarray,
+                      *others: np.ndarray) -> np.ndarray:
     """Bhattacharyya coefficients (n,) between the smoothed (H, S) histogram of the pixels of
     each HSV window ``hsv`` (n, sy, sx, 3) where ``masks`` (n, sy, sx) is set and
-    ``reference``, all blobs at once.
+    ``reference``, all blobs at once; with ``others`` (more references of the same shape), each
+    blob's largest coefficient over all of them (its histogram is built once).
 
     Equal to ``bhattacharyya(smooth(hs_histogram(hsv[i], masks[i], bins)), reference)`` for each
     i (same binning as cv2.calcHist, same kernel as smooth()), without a per-blob loop.
@@ -108,10 +110,15 @@ def blob_similarities(hsv: np.ndarray, masks: np.ndarray, reference: np.ndarray)
     counts = np.bincount(row * (hb * sb) + bin_, minlength=n * hb * sb)
     h = _smoothing_matrix(hb) @ counts.reshape(n, hb, sb).astype(np.float64) \
         @ _smoothing_matrix(sb).T
-    ref = np.asarray(reference, np.float64)
-    num = np.sqrt(h * ref).sum(axis=(1, 2))
-    den = np.sqrt(h.sum(axis=(1, 2)) * ref.sum())
-    return np.divide(num, den, out=np.zeros(n), where=den > 0)
+    root = np.sqrt(h)
+    total = h.sum(axis=(1, 2))
+    best = np.zeros(n)
+    for ref in (reference, *others):
+        ref = np.asarray(ref, np.float64)
+        num = (root * np.sqrt(ref)).sum(axis=(1, 2))
+        den = np.sqrt(total * ref.sum())
+        best = np.maximum(best, np.divide(num, den, out=np.zeros(n), where=den > 0))
+    return best
 
 
 def bhattacharyya(hist: np.ndarray, reference: np.ndarray) -> float:

@@ -29,7 +29,7 @@ mostly fixed per-call overhead (see :func:`wristtrack.sim.marker_scene.time_dete
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -51,6 +51,7 @@ from wristtrack.detect.detections import Detections
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.skin import SkinModel, SkinRegion
 from wristtrack.errors import ConfigError, InputError
+from wristtrack.hand import MARKER_NAMES
 
 
 @dataclass(frozen=True)
@@ -177,6 +178,7 @@ class MarkerDetector:
         self.adapted_count = 0  # adapt() calls that changed the colour models
         self.skin = SkinModel(config)
         self.last_blobs: list[Blob] = []
+        self._prev_uv: np.ndarray | None = None  # the blobs of the frame before last_blobs
         self.last_region: SkinRegion | None = None
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
@@ -214,41 +216,70 @@ class MarkerDetector:
         None without a depth frame) of one frame; details in :attr:`last_blobs`."""
         self._check(bgr, depth)
         h, w = bgr.shape[:2]
-        half = cv2.resize(bgr, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
-        region = self.skin.region(half, (h, w))
-        self.last_region = region
         blobs = None
-        near = self._near_last_blobs(region)
+        near = self._near_last_blobs((h, w))
         if near is not None:
-            stack = self._candidates(bgr, half, depth, near)
+            # only the window is downsampled and gated: no whole-frame work at all
+            X0, Y0, X1, Y1 = near
+            half = cv2.resize(bgr[Y0:Y1, X0:X1], ((X1 - X0) // 2, (Y1 - Y0) // 2),
+                              interpolation=cv2.INTER_AREA)
+            region = self.skin.window_region(half, near)
+            stack = self._candidates(bgr, half, depth, region)
             blobs = [] if stack is None else self._classify(stack)
+            self.last_region = region
             if len(blobs) < len(self.last_blobs):  # something may lie outside: search it all
                 blobs = None
         if blobs is None:
-            stack = self._candidates(bgr, half, depth, region)
+            half = cv2.resize(bgr, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+            region = self.skin.region(half, (h, w))
+            self.last_region = region
+            X0, Y0, X1, Y1 = region.box
+            stack = self._candidates(bgr, half[Y0 // 2 : Y1 // 2, X0 // 2 : X1 // 2], depth,
+                                     region)
             blobs = [] if stack is None else self._classify(stack)
+            if (region.found and self.skin.adapted
+                    and len(blobs) < min(len(self.last_blobs), len(MARKER_NAMES))):
+                # Markers lost under the learned skin model (the light's colour drifted faster
+                # than adapt() followed): the whole frame again, ungated, as before any skin was
+                # known. The tracker's association sorts out what clutter that admits.
+                whole = SkinRegion((0, 0, w - w % 2, h - h % 2), None, region.scale)
+                stack = self._candidates(bgr, half, depth, whole)
+                more = [] if stack is None else self._classify(stack)
+                if len(more) > len(blobs):
+                    blobs, self.last_region = more, whole
+        self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
         return Detections(timestamp, uv, d)
 
-    def _near_last_blobs(self, region: SkinRegion) -> SkinRegion | None:
-        """The skin region cut down to the neighbourhood of the last frame's blobs (the hand
-        moves little between frames), or None to search the whole skin region: with fewer than
-        3 blobs last frame, or when tracking is off. The caller searches the whole region again
-        whenever this finds fewer blobs than the last frame had."""
+    def _near_last_blobs(self, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
+        """The window around where the markers should be (box (x0, y0, x1, y1), corners on
+        multiples of the skin downsampling): the last frame's blobs, each moved on by its own
+        motion since the frame before (matched by nearness), plus a margin. None to search the
+        whole frame: fewer than 3 blobs last frame, the skin model still gathering its first
+        frames, or tracking off. The caller searches the whole frame again whenever the window
+        gives fewer blobs than the last frame had."""
         cfg = self.config
-        if not cfg.track_roi or len(self.last_blobs) < 3:
+        if (not cfg.track_roi or len(self.last_blobs) < 3
+                or not (self.skin.adapted or cfg.skin_adapt_frames <= 0)):
             return None
         uv = np.array([b.uv for b in self.last_blobs])
+        if self._prev_uv is not None and len(self._prev_uv):
+            d = np.linalg.norm(uv[:, None] - self._prev_uv[None], axis=2)
+            step = uv - self._prev_uv[d.argmin(1)]
+            moved = d.min(1) < cfg.track_margin_px  # the same blob one frame earlier
+            uv = np.concatenate((uv, uv[moved] + step[moved]))
         lo, hi = uv.min(0), uv.max(0)
         m = max(cfg.track_margin_px, cfg.track_margin_ratio * float((hi - lo).max()))
-        X0, Y0, X1, Y1 = region.box
-        x0, y0 = max(int(lo[0] - m) // 2 * 2, X0), max(int(lo[1] - m) // 2 * 2, Y0)
-        x1, y1 = min(int(hi[0] + m + 2) // 2 * 2, X1), min(int(hi[1] + m + 2) // 2 * 2, Y1)
+        s = cfg.skin_downsample
+        H, W = shape
+        x0, y0 = max(int(lo[0] - m) // s * s, 0), max(int(lo[1] - m) // s * s, 0)
+        x1 = min(-(-int(hi[0] + m + 1) // s) * s, W // s * s)
+        y1 = min(-(-int(hi[1] + m + 1) // s) * s, H // s * s)
         if x1 - x0 < 16 or y1 - y0 < 16:
             return None
-        return replace(region, box=(x0, y0, x1, y1))
+        return x0, y0, x1, y1
 
     def marker_mask(self, hsv: np.ndarray) -> np.ndarray:
         """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference."""
@@ -256,12 +287,12 @@ class MarkerDetector:
         return cv2.threshold(bp, self.config.backproject_threshold * 255, 255,
                              cv2.THRESH_BINARY)[1]
 
-    def _candidates(self, bgr, half, depth, region: SkinRegion) -> _Stack | None:
-        """Marker candidates, found at half resolution (cheap), weighted at full resolution."""
+    def _candidates(self, bgr, half_roi, depth, region: SkinRegion) -> _Stack | None:
+        """Marker candidates, found at half resolution (cheap), weighted at full resolution;
+        ``half_roi`` is the region's box of the frame at half resolution."""
         cfg = self.config
         X0, Y0, X1, Y1 = region.box
         hx0, hy0 = X0 // 2, Y0 // 2
-        half_roi = half[hy0 : Y1 // 2, hx0 : X1 // 2]
         hsv = cv2.cvtColor(half_roi, cv2.COLOR_BGR2HSV)
         n, labels, stats, cents = cv2.connectedComponentsWithStats(
             self.marker_mask(hsv), connectivity=8, ltype=cv2.CV_16U

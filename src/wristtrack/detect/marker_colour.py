@@ -87,7 +87,6 @@ class MarkerColour:
     def similarities(self, hsv: np.ndarray, masks: np.ndarray) -> np.ndarray:
         """(n,) Bhattacharyya coefficient of each blob (see colour.blob_similarities) with the
         reference that suits it best: the learned one or the default."""
-        sims = blob_similarities(hsv, masks, self.default)
-        if self.learned is not None:
-            sims = np.maximum(sims, blob_similarities(hsv, masks, self.learned))
-        return sims
+        if self.learned is None:
+            return blob_similarities(hsv, masks, self.default)
+        return blob_similarities(hsv, masks, self.default, self.learned)

@@ -132,12 +132,14 @@ class SkinRegion:
 
     ``box`` (x0, y0, x1, y1) is full-resolution, end-exclusive. ``gate`` is the dilated skin
     mask at 1/``scale`` resolution (nonzero = on or next to skin), None when no skin was found
-    and the whole image is searched.
+    and the whole image is searched; its pixel (0, 0) covers full-resolution pixel ``origin``
+    (the image's corner, or the corner of the window it was computed for).
     """
 
     box: tuple[int, int, int, int]
     gate: np.ndarray | None
     scale: int
+    origin: tuple[int, int] = (0, 0)
 
     @property
     def found(self) -> bool:
@@ -151,8 +153,10 @@ class SkinRegion:
         h, w = self.gate.shape
         # pixel centres at integers: full-res u covers low-res column floor((u + 0.5) / scale)
         # (np.clip is slow on tiny arrays)
-        c = np.minimum(np.maximum(((uv[:, 0] + 0.5) // self.scale).astype(int), 0), w - 1)
-        r = np.minimum(np.maximum(((uv[:, 1] + 0.5) // self.scale).astype(int), 0), h - 1)
+        u = uv[:, 0] - self.origin[0] + 0.5
+        v = uv[:, 1] - self.origin[1] + 0.5
+        c = np.minimum(np.maximum((u // self.scale).astype(int), 0), w - 1)
+        r = np.minimum(np.maximum((v // self.scale).astype(int), 0), h - 1)
         return self.gate[r, c] > 0
 
 
@@ -244,6 +248,17 @@ class SkinModel:
         if not self.adapted and cfg.skin_adapt_frames > 0:
             self._accumulate(ycc, skin, labels == keep[0])
         return SkinRegion(box, gate, s)
+
+    def window_region(self, half_window: np.ndarray, box: tuple[int, int, int, int]) -> SkinRegion:
+        """The skin gate of one window only (``box`` full-resolution, corners on multiples of
+        the downsampling; ``half_window`` that window at half resolution): the skin pixels
+        there, dilated, without the whole frame's component analysis. For the search near the
+        predicted markers while tracking; it neither fits nor adapts the model."""
+        s = self.config.skin_downsample
+        hh, hw = half_window.shape[:2]
+        small = cv2.resize(half_window, (hw * 2 // s, hh * 2 // s), interpolation=cv2.INTER_AREA)
+        gate = cv2.dilate(self.mask(cv2.cvtColor(small, cv2.COLOR_BGR2YCrCb)), self._kernel)
+        return SkinRegion(box, gate, s, (box[0], box[1]))
 
     def _accumulate(self, ycc: np.ndarray, skin: np.ndarray, component: np.ndarray) -> None:
         """Gather the chroma of the main skin component; fit once enough frames were seen."""

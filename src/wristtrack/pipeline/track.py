@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.special import chdtri
 
 from wristtrack.analysis.kinematics import analyse_file
 from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
@@ -209,6 +210,8 @@ def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None
     if not run.learned and result.status == Status.TRACKING:
         _learn(run.detector, frame.bgr, det, result)
         run.learned = True
+    elif run.learned and frame.index % ADAPT_EVERY == 0 and _confident(result):
+        _learn(run.detector, frame.bgr, det, result, adapt=True)
     rows.tracked(frame.index, frame.timestamp, result)
     if rows.overlay is not None:
         rows.overlay.add(frame.bgr, det, result)
@@ -306,13 +309,29 @@ def _no_initialisation(recording: Recording, n_frames: int, tracker: Tracker) ->
     )
 
 
-def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult) -> None:
-    """Refine the detector's colour models from the six labelled markers of the first fix."""
+# The detector's colours follow slow changes of the light (detector.adapt) from every
+# ADAPT_EVERY-th frame whose markers the tracker labelled confidently: at least 4 associated and
+# an update whose NIS is within its 95 % chi-square quantile.
+ADAPT_EVERY = 10
+ADAPT_NIS_QUANTILE = 0.95
+
+
+def _confident(result: FrameResult) -> bool:
+    return (result.status == Status.TRACKING and result.n_visible >= 4 and result.nis_dof > 0
+            and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
+
+
+def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
+           adapt: bool = False) -> None:
+    """Refine the detector's colour models from the six labelled markers of the first fix, or
+    (``adapt``) blend in the markers labelled in this frame."""
     uv = np.full((6, 2), np.nan)
     for blob, label in enumerate(result.labels):
         if label >= 0:
             uv[label] = det.uv[blob]
-    if np.isfinite(uv).all():
+    if adapt:
+        detector.adapt(bgr, uv)
+    elif np.isfinite(uv).all():
         detector.learn_markers(bgr, uv)
 
 
