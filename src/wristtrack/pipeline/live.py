@@ -208,7 +208,7 @@ class BackgroundLearning(threading.Thread):
     def run(self) -> None:
         try:
             _learn(self._learning, *self._args)
-        except Exception:  # noqa: BLE001 - half-learned models must not be handed over
+        except Exception:  # any failure: half-learned models must not be handed over
             self._learning = None  # a refinement that cannot be made must not stop a session
 
     def apply_to(self, detector: MarkerDetector) -> None:
@@ -252,6 +252,7 @@ def track_live(
     summary = SummaryAccumulator()
     log = LiveLog()
     learner: BackgroundLearning | None = None
+    skipped: list[dict[str, Any]] = []  # unusable frames, for summary.json (drops: live.json)
     recorder = LiveRecorder(record, camera, source.hand) if record is not None else None
     slot = NewestFrameSlot()
     capture = CaptureThread(source, slot, recorder)
@@ -280,13 +281,15 @@ def track_live(
                 if not frame.ok:
                     writer.write(_skipped_row(frame.index, frame.timestamp, 0, "bad_frame"))
                     log.bad.append(frame.index)
+                    skipped.append({"frame": frame.index, "error": frame.error})
                     continue
                 det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
                 try:
                     result = tracker.step(det)
-                except InputError:  # e.g. a timestamp going backwards: skip this frame
+                except InputError as exc:  # e.g. a timestamp going backwards: skip the frame
                     writer.write(_skipped_row(frame.index, frame.timestamp, det.count, "skipped"))
                     log.bad.append(frame.index)
+                    skipped.append({"frame": frame.index, "error": str(exc)})
                     continue
                 if result.frame != frame.index:  # after dropped frames: the source's numbers
                     result = replace(result, frame=frame.index)
@@ -323,8 +326,7 @@ def track_live(
         camera=camera.to_dict(),
         source=str(source.source),
         settings={**_settings(config), "smoothed": False, "live": True},
-        skipped_frames=[{"frame": i, "error": "dropped: not processed within the frame "
-                         "period (real time)"} for i in log.dropped],
+        skipped_frames=skipped,
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
         kinematics=analyse_file(out / "poses.csv"),
