@@ -270,3 +270,17 @@ def test_reference_gaps_are_left_out_not_bridged(scene, tmp_path):
     ours_in_gap = ((OFFSET + RATIO * traj.t > 3.0) & (OFFSET + RATIO * traj.t < 3.4)).sum()
     assert full["frames_compared"] - r["frames_compared"] >= ours_in_gap
     assert abs(r["time_offset_s"] - OFFSET) < 2e-4 and _transform_errors(r)[1] < 0.05
+
+
+def test_a_truth_csv_reference_is_the_camera_frame_on_the_same_clock(scene, tmp_path, capsys):
+    run, _, traj = scene
+    write_truth(tmp_path / "truth.csv", traj)
+    r = compare(run, tmp_path / "truth.csv").result
+    assert r["reference"]["kind"] == "truth"
+    assert abs(r["time_offset_s"]) < 1e-4 and abs(r["clock_ratio"] - 1) < 1e-5
+    np.testing.assert_allclose(r["registration"]["rotation"], np.eye(3), atol=1e-6)
+    np.testing.assert_allclose(r["registration"]["translation"], 0.0, atol=1e-5)
+    assert r["pos_rmse_mm"] < 0.01 and r["frames_compared"] == len(traj.t)
+    assert main(["compare", str(run), str(tmp_path / "truth.csv"), "--cluster", "A,B,C",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "takes neither --markers nor --cluster" in capsys.readouterr().err

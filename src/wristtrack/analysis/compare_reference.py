@@ -163,7 +163,7 @@ def from_cluster(data: MarkerData, labels: list[str]) -> ReferencePoses:
 
 def from_truth(path: str | Path) -> ReferencePoses:
     """A simulated recording's truth.csv as a reference: its camera frame is the 'lab'."""
-    from wristtrack.analysis.export import frame_rate
+    from wristtrack.io.markers.trajectories import frame_rate
     from wristtrack.io.poses import read_poses, rows_to_poses
 
     cols = read_poses(path)
@@ -191,9 +191,10 @@ class Interpolator:
         self._max_gap = 1.5 / ref.rate
 
     def usable(self, tq: np.ndarray) -> np.ndarray:
-        j = np.searchsorted(self.t, tq)
-        inside = (j >= 1) & (j < len(self.t))
-        jj = np.clip(j, 1, len(self.t) - 1)
+        tq = np.asarray(tq, dtype=float)
+        # Both ends count as inside (to a nanosecond: the clock fit is not exact to the bit).
+        inside = (tq >= self.t[0] - 1e-9) & (tq <= self.t[-1] + 1e-9)
+        jj = np.clip(np.searchsorted(self.t, tq), 1, len(self.t) - 1)
         return inside & (self.t[jj] - self.t[jj - 1] <= self._max_gap)
 
     def __call__(self, tq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
