@@ -340,3 +340,51 @@ def test_openni_errors_are_one_line(monkeypatch, tmp_path):
     with pytest.raises(ConfigError, match=r"pip install 'wristtrack\[openni\]'"):
         open_live("openni")
 
+
+
+# ------------------------------------------------------------------------------ --record writer
+
+
+def test_recorder_never_blocks_and_counts_what_the_disk_could_not_take(short, tmp_path):
+    import threading
+
+    from wristtrack.io.live_record import LiveRecorder
+
+    frames = [f for _, f in zip(range(5), FolderRecording(short).frames(), strict=False)]
+    cam = FolderRecording(short).camera
+    recorder = LiveRecorder(tmp_path / "rec", cam, max_pending=2)
+    entered, release = threading.Event(), threading.Event()
+    write = recorder.writer.write
+
+    def slow_write(*args):  # a disk that stalls on the first frame
+        entered.set()
+        release.wait(10)
+        write(*args)
+
+    recorder.writer.write = slow_write
+    recorder.put(frames[0].timestamp, frames[0].bgr, frames[0].depth)
+    assert entered.wait(10)
+    for f in frames[1:]:  # two wait in the queue, two find it full: put() returns at once
+        recorder.put(f.timestamp, f.bgr, f.depth)
+    assert recorder.lost == 2
+    release.set()
+    recorder.close()
+    written = list(FolderRecording(tmp_path / "rec").frames())
+    assert [f.timestamp for f in written] == [f.timestamp for f in frames[:3]]
+    np.testing.assert_array_equal(written[2].depth, frames[2].depth)
+
+
+def test_recorder_reports_a_write_failure_and_goes_on(short, tmp_path):
+    from wristtrack.io.live_record import LiveRecorder
+
+    frames = [f for _, f in zip(range(3), FolderRecording(short).frames(), strict=False)]
+    recorder = LiveRecorder(tmp_path / "rec", FolderRecording(short).camera)
+
+    def full_disk(*args):
+        raise InputError("could not write rgb/000000.png (No space left on device)")
+
+    recorder.writer.write = full_disk
+    for f in frames:
+        recorder.put(f.timestamp, f.bgr, f.depth)
+    recorder.close()
+    assert recorder.error.endswith("(No space left on device)") and recorder.lost == 3

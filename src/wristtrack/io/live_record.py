@@ -44,6 +44,7 @@ class LiveRecorder:
         self.folder = self.writer.folder
         self.lost = 0
         self.error: str | None = None
+        self._lock = threading.Lock()
         self._queue: queue.Queue = queue.Queue(maxsize=max_pending)
         self._thread = threading.Thread(target=self._run, name="wristtrack-record", daemon=True)
         self._thread.start()
@@ -55,11 +56,15 @@ class LiveRecorder:
     def put(self, timestamp: float, bgr: np.ndarray, depth: np.ndarray | None) -> None:
         """Queue one frame; never blocks (a full queue loses the frame and counts it)."""
         if self.error is not None:
-            self.lost += 1
+            self._lose()
             return
         try:
             self._queue.put_nowait((timestamp, bgr, depth))
         except queue.Full:
+            self._lose()
+
+    def _lose(self) -> None:
+        with self._lock:  # counted from the capture thread and the writer thread
             self.lost += 1
 
     def _run(self) -> None:
@@ -68,12 +73,13 @@ class LiveRecorder:
             if item is _END:
                 return
             if self.error is not None:
-                continue  # drain: the caller learns of the failure from ``error``
+                self._lose()  # drain: the caller learns of the failure from ``error``
+                continue
             try:
                 self.writer.write(*item)
             except (WristtrackError, OSError) as exc:
                 self.error = str(exc)
-                self.lost += 1
+                self._lose()
 
     def close(self) -> None:
         """Write what is queued, then close the folder."""
