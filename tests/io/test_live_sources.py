@@ -201,6 +201,8 @@ def test_realsense_viewer_bag_written_by_an_older_sdk():
     np.testing.assert_allclose(cam.dist, (0.1, -0.2, 0.001, 0.002, 0.01), atol=1e-7)
     assert cam.depth_scale == pytest.approx(1e-4, rel=1e-6)
     assert len(frames) >= 6  # of 8 (the recorder misses the first)
+    with open_live(str(BAG)) as again:  # a bare recording path: the same source
+        assert type(again) is type(rec) and again.camera == cam
     r, c = np.mgrid[0:48, 0:64]
     first = int(frames[0].bgr[0, 0, 0])
     for k, frame in enumerate(frames):

@@ -4,7 +4,8 @@
   ``.db3``: a RealSense SDK recording played as the camera;
 - ``openni`` / ``openni:URI``: an OpenNI2 camera (Xtion, Kinect v1, Orbbec); ``openni:FILE.oni``;
 - ``replay:RECORDING``: a recording folder played at its own timestamps;
-- an integer or a device path (``0``, ``/dev/video2``): an OpenCV camera, colour only.
+- an integer or a device path (``0``, ``/dev/video2``): an OpenCV camera, colour only;
+- a bare ``FILE.bag``/``.db3`` or ``FILE.oni``: as ``realsense:FILE`` or ``openni:FILE``.
 
 Each device library is imported only when its source is asked for.
 """
@@ -47,6 +48,10 @@ def open_live(
         if arg and (arg.lower().endswith(".oni") or Path(arg).is_file()):
             return OpenNIRecording(None, camera, hand, file=arg, **options)
         return OpenNIRecording(arg or None, camera, hand, **options)
+    suffix = Path(spec).suffix.lower()
+    if suffix in (".bag", ".db3", ".oni"):  # a device recording named on its own
+        return open_live(f"{'openni' if suffix == '.oni' else 'realsense'}:{spec}", camera, hand,
+                         **options)
     if spec.lstrip("-").isdigit() or spec.startswith(("/dev/", "rtsp://", "http://", "https://")):
         from wristtrack.io.live import LiveRecording
 
