@@ -8,7 +8,7 @@ from benchmarks.accuracy import DEFAULT, bound, score, sim_case, summary_lines
 from wristtrack.sim.motion import Trajectory
 from wristtrack.tracking.tracker import FrameResult, Status
 
-NAN3, NAN33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+NAN3 = np.full(3, np.nan)
 
 
 def _results(truth: Trajectory, rot_err_deg: float = 0.0, every: int = 1) -> list[FrameResult]:
@@ -19,13 +19,14 @@ def _results(truth: Trajectory, rot_err_deg: float = 0.0, every: int = 1) -> lis
     out = []
     for k in range(len(truth)):
         if k % every:
-            out.append(FrameResult(k, truth.t[k], Status.LOST, NAN33, NAN3, NAN33, NAN3, NAN3,
-                                   NAN3, None, np.zeros(0, int), 0, 0))
+            out.append(FrameResult.empty(k, truth.t[k], Status.LOST))
             continue
         R_ch = Rz @ truth.R_ch[k]
         R_rel = truth.R_ch[0].T @ R_ch
-        out.append(FrameResult(k, truth.t[k], Status.TRACKING, R_ch, truth.t_ch[k], R_rel,
-                               truth.p_rel[k], NAN3, NAN3, None, np.zeros(0, int), 6, 0))
+        out.append(FrameResult(
+            frame=k, timestamp=truth.t[k], status=Status.TRACKING, R_ch=R_ch, t_ch=truth.t_ch[k],
+            R=R_rel, p=truth.p_rel[k], v=NAN3, w=NAN3, cov=None, labels=np.zeros(0, int),
+            n_visible=6, n_clutter=0))
     return out
 
 
