@@ -116,10 +116,17 @@ def robustness(
                 m["wrong_side"] = float(np.mean([r.side != side for r in est])) if est else 0.0
                 per[label].append(m)
         out[condition] = {
-            label: {key: float(np.nanmean([m[key] for m in ms])) for key in ms[0]}
+            label: {key: _mean([m[key] for m in ms]) for key in ms[0]}
             for label, ms in per.items()
         }
     return out
+
+
+def _mean(values: list[float]) -> float:
+    """Mean over the seeds that have the figure (NaN, quietly, when none has)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(v.mean()) if len(v) else float("nan")
 
 
 def _f(x: float, fmt: str) -> str:
@@ -177,7 +184,9 @@ def summary_lines(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
         if m is None or condition == "clean" or condition.startswith("all"):
             continue
         ratio = m["rot"] / clean["rot"] if clean["rot"] > 0 else np.inf
-        if ratio > 1.5:
+        if not np.isfinite(m["rot"]):
+            worse.append(f"{condition} (no estimate)")
+        elif ratio > 1.5:
             worse.append(f"{condition} {ratio:.1f}x")
     out = [
         f"- Each effect alone within 1.5x the clean orientation RMSE ({clean['rot']:.2f} deg): "
