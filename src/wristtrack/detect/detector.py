@@ -50,6 +50,7 @@ from wristtrack.detect.colour import back_project, gaussian_reference, hs_histog
 from wristtrack.detect.detections import Detections
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.skin import SkinModel, SkinRegion
+from wristtrack.detect.streaks import MAX_STREAK_RATIO, find_streaks
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import MARKER_NAMES
 
@@ -179,6 +180,10 @@ class MarkerDetector:
         self.skin = SkinModel(config)
         self.last_blobs: list[Blob] = []
         self._prev_uv: np.ndarray | None = None  # the blobs of the frame before last_blobs
+        # mean BGR of the labelled markers and of the skin around them (learn_markers, adapt):
+        # the two colours a motion-blurred marker's pixels mix (detect/streaks.py)
+        self.marker_bgr: np.ndarray | None = None
+        self.skin_bgr: np.ndarray | None = None
         self.last_region: SkinRegion | None = None
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
@@ -247,11 +252,36 @@ class MarkerDetector:
                 more = [] if stack is None else self._classify(stack)
                 if len(more) > len(blobs):
                     blobs, self.last_region = more, whole
+        if near is not None and len(blobs) < min(len(self.last_blobs), len(MARKER_NAMES)):
+            blobs = blobs + self._streaks(bgr, depth, near, blobs)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
         return Detections(timestamp, uv, d)
+
+    def _streaks(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
+        """Motion-blurred markers in the tracking window ``box`` that the colour search missed
+        (detect/streaks.py), as suspect blobs (reason "streak"); none before learning."""
+        d = self._last_diameter
+        if self.marker_bgr is None or self.skin_bgr is None or not d > 0:
+            return []
+        found = [b.uv for b in blobs]
+        out = []
+        # a streak reaches up to MAX_STREAK_RATIO / 2 diameters beyond where its marker is
+        grow = int(MAX_STREAK_RATIO * d / 2) + 1
+        H, W = bgr.shape[:2]
+        box = (max(box[0] - grow, 0), max(box[1] - grow, 0), min(box[2] + grow, W),
+               min(box[3] + grow, H))
+        for u, v, z, length, width, angle in find_streaks(bgr, depth, box, self.marker_bgr,
+                                                          self.skin_bgr, d):
+            if any(math.hypot(u - a, v - b) < d for a, b in found):
+                continue  # the colour search has this one
+            out.append(Blob(uv=(u, v), area=math.pi / 4 * d * d,
+                            depth=z * self.camera.depth_scale, similarity=0.0, major=length,
+                            minor=width, angle=angle, skew=0.0, expected_diameter=d,
+                            suspect=True, reason="streak"))
+        return out
 
     def _near_last_blobs(self, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
         """The window around where the markers should be (box (x0, y0, x1, y1), corners on
@@ -481,6 +511,7 @@ class MarkerDetector:
         hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
         self.colour.set_learned(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
         self.skin.learn(bgr, skin)
+        self._mean_colours(bgr, marker, skin, 1.0)
 
     def adapt(self, bgr: np.ndarray, uv: np.ndarray) -> bool:
         """Follow a slow change of the marker and skin colours from confidently labelled markers.
@@ -499,8 +530,19 @@ class MarkerDetector:
         hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
         changed = self.colour.adapt(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
         changed = self.skin.adapt(bgr, skin) or changed
+        if changed:
+            self._mean_colours(bgr, marker, skin, 0.1)
         self.adapted_count += changed
         return changed
+
+    def _mean_colours(self, bgr, marker, skin, rate: float) -> None:
+        """Blend the mean BGR of the marker and skin masks into marker_bgr / skin_bgr."""
+        for name, mask in (("marker_bgr", marker), ("skin_bgr", skin)):
+            px = bgr[mask > 0]
+            if len(px):
+                new = px.mean(axis=0)
+                old = getattr(self, name)
+                setattr(self, name, new if old is None else (1 - rate) * old + rate * new)
 
     def _labelled_masks(self, bgr: np.ndarray, uv: np.ndarray, caller: str):
         """(marker mask, skin mask, markers used) around the labelled marker centres ``uv``, or

@@ -1,0 +1,91 @@
+"""Motion-blurred markers: streaks found by chromaticity where the markers should be.
+
+A marker moving at 1-1.5 m/s, 0.6 m away, under a 1/60-1/30 s shutter smears into a streak
+40-50 px long and one marker wide. Each pixel of the streak saw the marker for only a fraction
+of the exposure, so its colour is a mix of a little marker blue and much skin: its hue and
+saturation no longer match the marker's reference, and the colour detector finds nothing.
+
+Here every pixel of a window is placed on the segment from the skin's chromaticity to the
+marker's (chromaticity: colour divided by its brightness, so shading and exposure do not move
+it): t = (c - c_skin).(c_marker - c_skin) / |c_marker - c_skin|^2, the fraction of the exposure
+the marker covered it, mixing being linear. Components of t above a small threshold are
+streaks when their width fits one marker diameter (the blur does not widen a streak across its
+motion) and their length at most MAX_STREAK_RATIO diameters. The t-weighted centroid of a
+streak is the marker's centre at mid-exposure, the frame's timestamp: the same quantity a
+sharp blob gives, with the streak's length along its direction as extra uncertainty.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from wristtrack.detect.blobs import shapes, trimmed_depth
+
+MIN_FRACTION = 0.12  # a pixel is part of a streak when the marker covered it this long
+MAX_STREAK_RATIO = 8.0  # streak length / marker diameter above: not one marker
+WIDTH_RATIO = (0.5, 1.8)  # streak width / marker diameter (the PSF and edge mixing widen it)
+MIN_MASS = 0.5  # streak mass (sum of t) / marker disc area below: too faint to trust
+GROW_PX = 3  # the thresholded streak is grown by this to take in its faint ends
+
+
+def chromaticity(bgr: np.ndarray) -> np.ndarray:
+    """(..., 3) colour divided by its channel sum (1 for black, to avoid a division by 0)."""
+    c = np.asarray(bgr, np.float32)
+    return c / np.maximum(c.sum(axis=-1, keepdims=True), 1.0)
+
+
+def find_streaks(
+    bgr: np.ndarray,
+    depth: np.ndarray | None,
+    box: tuple[int, int, int, int],
+    marker_bgr: np.ndarray,
+    skin_bgr: np.ndarray,
+    diameter_px: float,
+) -> list[tuple[float, float, float, float, float, float]]:
+    """Streaks of one marker diameter ``diameter_px`` in the window ``box`` (x0, y0, x1, y1) of
+    ``bgr``: (u, v, depth in the depth image's units (NaN if none), length px, width px,
+    direction rad) each. ``marker_bgr`` and ``skin_bgr`` are the two colours mixed."""
+    x0, y0, x1, y1 = box
+    win = bgr[y0:y1, x0:x1]
+    cs, cm = chromaticity(skin_bgr), chromaticity(marker_bgr)
+    axis = cm - cs
+    norm2 = float(axis @ axis)
+    if norm2 < 1e-6 or not diameter_px > 0:
+        return []
+    t = (chromaticity(win) - cs) @ (axis / norm2)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(
+        (t > MIN_FRACTION).astype(np.uint8), connectivity=8)
+    out = []
+    disc = np.pi / 4 * diameter_px**2
+    g = GROW_PX
+    grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    for k in range(1, n):
+        bx, by, bw, bh, area = stats[k]
+        if area < 0.3 * disc or max(bw, bh) > (MAX_STREAK_RATIO + 1) * diameter_px:
+            continue
+        if bx == 0 or by == 0 or bx + bw == t.shape[1] or by + bh == t.shape[0]:
+            continue  # cut by the window: its centre cannot be trusted
+        # the component grown by a few pixels: a streak's faint ends (each end pixel saw the
+        # marker briefly) lie below the threshold; weights unclipped, so the skin's noise
+        # around it averages out instead of pulling the centre
+        gx0, gy0 = max(bx - g, 0), max(by - g, 0)
+        sl = (slice(gy0, by + bh + g), slice(gx0, bx + bw + g))
+        mask = cv2.dilate((labels[sl] == k).astype(np.uint8), grow) > 0
+        w = np.where(mask, t[sl], 0.0)
+        if w.sum() < MIN_MASS * disc * 0.5:
+            continue
+        bx, by = gx0, gy0
+        sh = shapes(w[None].astype(np.float64))
+        width, length = float(sh.minor[0]), float(sh.major[0])
+        if not (WIDTH_RATIO[0] * diameter_px <= width <= WIDTH_RATIO[1] * diameter_px):
+            continue
+        if length > MAX_STREAK_RATIO * diameter_px or length < 1.3 * diameter_px:
+            continue  # a sharp blob is the colour detector's; a longer one is not one marker
+        z = np.nan
+        if depth is not None:
+            z = float(trimmed_depth(depth[y0:y1, x0:x1][sl][None], (w > 0.3)[None],
+                                    (0.2, 0.8))[0])
+        out.append((x0 + bx + float(sh.cx[0]), y0 + by + float(sh.cy[0]), z, length, width,
+                    float(sh.angle[0])))
+    return out
