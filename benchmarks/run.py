@@ -428,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     from benchmarks.robustness import robustness_sections
 
-    robust = robustness_sections(cache, seeds, n_frames=120 if quick else None,
+    robust = robustness_sections(cache, seeds, n_frames=60 if quick else None,
                                  findings=findings)
     batch = _batch_section(findings, quick)
     from benchmarks.live import SCENARIOS as LIVE_SCENARIOS
