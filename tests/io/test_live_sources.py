@@ -320,6 +320,7 @@ def test_openni_dummy_driver_streams_registered_depth_and_colour(tmp_path):
     assert live["ended_by"] == "time limit" and live["frames"]["total"] >= 10
     frames = list(FolderRecording(tmp_path / "rec").frames())
     assert len(frames) >= live["frames"]["total"]
+    # each colour frame paired with its depth (the very first may precede the depth stream)
     assert all(f.depth is not None and f.depth.dtype == np.uint16 for f in frames[1:])
     assert frames[0].bgr.shape == (240, 320, 3)
     dt = np.diff([f.timestamp for f in frames])
@@ -390,3 +391,20 @@ def test_recorder_reports_a_write_failure_and_goes_on(short, tmp_path):
         recorder.put(f.timestamp, f.bgr, f.depth)
     recorder.close()
     assert recorder.error.endswith("(No space left on device)") and recorder.lost == 3
+
+
+def test_openni_colour_and_depth_frames_are_paired_by_time():
+    """The order the dummy driver delivers in (D1 C1 D2 D3 C2 D4 C3 C4 ...), and a lost depth:
+    each colour frame gets the depth of its own moment, or none."""
+    from collections import deque
+
+    from wristtrack.io.openni import _pair
+
+    colors, depths, paired = deque(), deque(maxlen=4), []
+    arrivals = "D1 C1 D2 D3 C2 D4 C3 C4 C5 D6 C6 D7 C7".split()  # D5 lost
+    for item in arrivals:
+        kind, k = item[0], int(item[1:])
+        (depths if kind == "D" else colors).append((np.full((1, 1), k), k / 30))
+        paired += [(int(c[0, 0]), None if d is None else int(d[0, 0]))
+                   for c, _, d in _pair(colors, depths, 0.5 / 30, True)]
+    assert paired == [(1, 1), (2, 2), (3, 3), (4, 4), (5, None), (6, 6), (7, 7)]

@@ -14,6 +14,7 @@ import ctypes.util
 import math
 import os
 import platform
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -157,7 +158,12 @@ class OpenNIRecording(Recording):
         if start:
             raise InputError(f"{self.source}: an OpenNI2 stream cannot start at frame {start}")
         index, t0 = 0, None
-        pending_depth = None
+        # Colour and depth arrive as separate frames, in either order and sometimes two of one
+        # kind in a row: pair each colour frame with the depth frame of the same moment (within
+        # half a frame period). A colour frame whose depth is lost goes without depth.
+        colors: deque[tuple[np.ndarray, float]] = deque()
+        depths: deque[tuple[np.ndarray, float]] = deque(maxlen=4)
+        tolerance = 0.5 / (float(self._color.get_video_mode().fps) or 30.0)
         while self.max_frames is None or index < self.max_frames:
             ready = self._ni.wait_for_any_stream(self._streams, FRAME_TIMEOUT_S)
             if ready is None:
@@ -165,25 +171,34 @@ class OpenNIRecording(Recording):
                     return
                 raise InputError(f"{self.source} delivered no frame for {FRAME_TIMEOUT_S:g} s; "
                                  "check the device")
-            if ready is self._depth:
-                frame = ready.read_frame()
-                pending_depth = np.frombuffer(frame.get_buffer_as_uint16(), np.uint16).reshape(
-                    frame.height, frame.width).copy()
-                continue
-            frame = self._color.read_frame()
-            rgb = np.frombuffer(frame.get_buffer_as_uint8(), np.uint8).reshape(
-                frame.height, frame.width, 3)
-            bgr = np.ascontiguousarray(rgb[..., ::-1])
-            self.check_size(bgr, f"{self.source} frame {index}")
-            t = frame.timestamp * 1e-6  # microseconds
-            t0 = t if t0 is None else t0
-            depth = pending_depth if self._depth is not None else None
-            if depth is not None and depth.shape != bgr.shape[:2]:
-                raise InputError(f"{self.source}: depth is {depth.shape[1]}x{depth.shape[0]} "
-                                 f"but colour is {bgr.shape[1]}x{bgr.shape[0]}; set both "
-                                 "streams to one resolution")
-            yield Frame(index, t - t0, bgr, depth)
-            index += 1
+            while ready is not None:  # read all that is waiting (the wait favours colour)
+                if ready is self._depth:
+                    depths.append(self._read_depth())
+                else:
+                    colors.append(self._read_color(index + len(colors)))
+                ready = self._ni.wait_for_any_stream(self._streams[::-1], 0)
+            for bgr, t, raw in _pair(colors, depths, tolerance, self._depth is not None):
+                t0 = t if t0 is None else t0
+                if raw is not None and raw.shape != bgr.shape[:2]:
+                    raise InputError(f"{self.source}: depth is {raw.shape[1]}x{raw.shape[0]} "
+                                     f"but colour is {bgr.shape[1]}x{bgr.shape[0]}; set both "
+                                     "streams to one resolution")
+                yield Frame(index, t - t0, bgr, raw)
+                index += 1
+
+    def _read_color(self, index: int) -> tuple[np.ndarray, float]:
+        frame = self._color.read_frame()
+        rgb = np.frombuffer(frame.get_buffer_as_uint8(), np.uint8).reshape(
+            frame.height, frame.width, 3)
+        bgr = np.ascontiguousarray(rgb[..., ::-1])  # a copy: the library reuses its buffer
+        self.check_size(bgr, f"{self.source} frame {index}")
+        return bgr, frame.timestamp * 1e-6  # microseconds
+
+    def _read_depth(self) -> tuple[np.ndarray, float]:
+        frame = self._depth.read_frame()
+        raw = np.frombuffer(frame.get_buffer_as_uint16(), np.uint16).reshape(
+            frame.height, frame.width).copy()
+        return raw, frame.timestamp * 1e-6
 
     def _release(self) -> None:
         for stream in self._streams:
@@ -202,6 +217,23 @@ class OpenNIRecording(Recording):
     def close(self) -> None:
         super().close()
         self._release()
+
+
+def _pair(colors: deque, depths: deque, tolerance: float, has_depth: bool) -> list[tuple]:
+    """(bgr, t, depth or None) for the waiting colour frames that can be settled now."""
+    out = []
+    while colors:
+        bgr, t = colors[0]
+        while depths and depths[0][1] < t - tolerance:
+            depths.popleft()  # older than any colour frame still to come
+        if depths and abs(depths[0][1] - t) <= tolerance:
+            out.append((bgr, t, depths.popleft()[0]))
+        elif not has_depth or depths or len(colors) > 4:
+            out.append((bgr, t, None))  # its depth is past, or too long in coming
+        else:
+            break  # its depth may still arrive
+        colors.popleft()
+    return out
 
 
 def _reason(exc: Exception) -> str:
