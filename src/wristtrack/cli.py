@@ -252,7 +252,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from wristtrack.analysis.compare import compare, format_comparison, write_comparison
+    from wristtrack.analysis.compare import compare, format_comparison
+    from wristtrack.report.comparison import write_comparison
 
     result = compare(args.run_dir, args.reference, markers=args.markers, cluster=args.cluster,
                      fit_ratio=not args.no_clock_ratio, max_lag_s=args.max_lag,

@@ -246,17 +246,9 @@ def compare(
     return Comparison(result, series)
 
 
-def write_comparison(out_dir: str | Path, comparison: Comparison) -> tuple[Path, Path]:
-    """comparison.json and comparison.html in ``out_dir``; returns their paths."""
-    from wristtrack.io.atomic import write_text_atomic
-    from wristtrack.report.comparison import write_comparison_html
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    json_path = out / "comparison.json"
-    text = json.dumps(_finite(comparison.result), indent=2, allow_nan=False)
-    write_text_atomic(json_path, text + "\n")
-    return json_path, write_comparison_html(out / "comparison.html", comparison)
+def comparison_json(comparison: Comparison) -> str:
+    """The text of comparison.json (non-finite numbers as null: JSON has no NaN)."""
+    return json.dumps(_finite(comparison.result), indent=2, allow_nan=False) + "\n"
 
 
 # Two crystal clocks differ by well under 0.1 %; a fit further off has aligned the wrong

@@ -7,18 +7,16 @@ from __future__ import annotations
 import base64
 import html
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from wristtrack import __version__
-from wristtrack.io.atomic import write_bytes_atomic
+from wristtrack.analysis.compare import Comparison, comparison_json
+from wristtrack.io.atomic import write_bytes_atomic, write_text_atomic
 from wristtrack.report.figures import AXIS_COLOURS, AXIS_NAMES, WIDTH_IN, figure_png
-
-if TYPE_CHECKING:
-    from wristtrack.analysis.compare import Comparison
 
 _CSS = """
 body { font-family: "DejaVu Sans", Arial, Helvetica, sans-serif; font-size: 10pt;
@@ -177,3 +175,12 @@ def write_comparison_html(path: str | Path, comparison: Comparison) -> Path:
     path = Path(path)
     write_bytes_atomic(path, render_comparison_html(comparison).encode("utf-8"))
     return path
+
+
+def write_comparison(out_dir: str | Path, comparison: Comparison) -> tuple[Path, Path]:
+    """comparison.json and comparison.html in ``out_dir``; returns their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    json_path = out / "comparison.json"
+    write_text_atomic(json_path, comparison_json(comparison))
+    return json_path, write_comparison_html(out / "comparison.html", comparison)
