@@ -10,6 +10,12 @@ that is processed gets its latency, from arrival to its pose row written, in ``l
 Ctrl-C (or SIGTERM) ends the session at the end of the current frame: the outputs are then
 complete, as when the source ends by itself. Live tracking is causal: smooth a ``--record``
 copy of the session offline.
+
+Two detector refinements cost more than a frame period at 30 fps (~40-60 ms each): the colour
+learning at the first fix runs in a thread (:class:`BackgroundLearning`); the offline loop's
+slow colour adaptation (every 10th confidently tracked frame, following a drift of the light)
+is not run live, so a session keeps the colours learnt at its first fix. Offline re-tracking of
+a ``--record`` copy gets both.
 """
 
 from __future__ import annotations
