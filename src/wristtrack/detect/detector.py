@@ -46,8 +46,9 @@ from wristtrack.detect.blobs import (
     unmix_two_backgrounds_stack,
     upsample2,
 )
-from wristtrack.detect.colour import back_project, gaussian_reference, hs_histogram, smooth
+from wristtrack.detect.colour import back_project, gaussian_reference
 from wristtrack.detect.detections import Detections
+from wristtrack.detect.learning import MarkerLearning
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.skin import SkinModel, SkinRegion
 from wristtrack.detect.streaks import MAX_STREAK_RATIO, find_streaks
@@ -157,7 +158,7 @@ class _Stack:
     z: np.ndarray | None = None  # (n,) metres
 
 
-class MarkerDetector:
+class MarkerDetector(MarkerLearning):
     """Blue-marker detector for one camera; keeps the adapted colour models between frames."""
 
     def __init__(self, camera: Camera, config: DetectorConfig | None = None) -> None:
@@ -229,8 +230,7 @@ class MarkerDetector:
             half = cv2.resize(bgr[Y0:Y1, X0:X1], ((X1 - X0) // 2, (Y1 - Y0) // 2),
                               interpolation=cv2.INTER_AREA)
             region = self.skin.window_region(half, near)
-            stack = self._candidates(bgr, half, depth, region)
-            blobs = [] if stack is None else self._classify(stack)
+            blobs = self._search(bgr, half, depth, region)
             self.last_region = region
             if len(blobs) < len(self.last_blobs):  # something may lie outside: search it all
                 blobs = None
@@ -239,26 +239,38 @@ class MarkerDetector:
             region = self.skin.region(half, (h, w))
             self.last_region = region
             X0, Y0, X1, Y1 = region.box
-            stack = self._candidates(bgr, half[Y0 // 2 : Y1 // 2, X0 // 2 : X1 // 2], depth,
-                                     region)
-            blobs = [] if stack is None else self._classify(stack)
-            if (region.found and self.skin.adapted
-                    and len(blobs) < min(len(self.last_blobs), len(MARKER_NAMES))):
+            roi = half[Y0 // 2 : Y1 // 2, X0 // 2 : X1 // 2]
+            blobs = self._search(bgr, roi, depth, region)
+            if self.reference_learned and self._short(blobs):
+                # markers lost under the learned colour (shade, a drifting light): again with
+                # the default colour beside it (detect/marker_colour.py)
+                more = self._search(bgr, roi, depth, region, wide=True)
+                if len(more) > len(blobs):
+                    blobs = more
+            if region.found and self.skin.adapted and self._short(blobs):
                 # Markers lost under the learned skin model (the light's colour drifted faster
                 # than adapt() followed): the whole frame again, ungated, as before any skin was
                 # known. The tracker's association sorts out what clutter that admits.
                 whole = SkinRegion((0, 0, w - w % 2, h - h % 2), None, region.scale)
-                stack = self._candidates(bgr, half, depth, whole)
-                more = [] if stack is None else self._classify(stack)
+                more = self._search(bgr, half, depth, whole, wide=True)
                 if len(more) > len(blobs):
                     blobs, self.last_region = more, whole
-        if near is not None and len(blobs) < min(len(self.last_blobs), len(MARKER_NAMES)):
+        if near is not None and self._short(blobs):
             blobs = blobs + self._streaks(bgr, depth, near, blobs)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
         return Detections(timestamp, uv, d)
+
+    def _short(self, blobs: list[Blob]) -> bool:
+        """Fewer blobs than the last frame had markers (at most six): some may be missed."""
+        return len(blobs) < min(len(self.last_blobs), len(MARKER_NAMES))
+
+    def _search(self, bgr, half_roi, depth, region: SkinRegion, wide: bool = False) -> list[Blob]:
+        """The blobs of one region (``half_roi``: its box at half resolution)."""
+        stack = self._candidates(bgr, half_roi, depth, region, wide)
+        return [] if stack is None else self._classify(stack)
 
     def _streaks(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
         """Motion-blurred markers in the tracking window ``box`` that the colour search missed
@@ -311,13 +323,15 @@ class MarkerDetector:
             return None
         return x0, y0, x1, y1
 
-    def marker_mask(self, hsv: np.ndarray) -> np.ndarray:
-        """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference."""
-        bp = back_project(hsv, self.colour.table)
+    def marker_mask(self, hsv: np.ndarray, wide: bool = False) -> np.ndarray:
+        """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference
+        (``wide``: the learned or the default one)."""
+        bp = back_project(hsv, self.colour.wide_table if wide else self.colour.table)
         return cv2.threshold(bp, self.config.backproject_threshold * 255, 255,
                              cv2.THRESH_BINARY)[1]
 
-    def _candidates(self, bgr, half_roi, depth, region: SkinRegion) -> _Stack | None:
+    def _candidates(self, bgr, half_roi, depth, region: SkinRegion,
+                    wide: bool = False) -> _Stack | None:
         """Marker candidates, found at half resolution (cheap), weighted at full resolution;
         ``half_roi`` is the region's box of the frame at half resolution."""
         cfg = self.config
@@ -325,7 +339,7 @@ class MarkerDetector:
         hx0, hy0 = X0 // 2, Y0 // 2
         hsv = cv2.cvtColor(half_roi, cv2.COLOR_BGR2HSV)
         n, labels, stats, cents = cv2.connectedComponentsWithStats(
-            self.marker_mask(hsv), connectivity=8, ltype=cv2.CV_16U
+            self.marker_mask(hsv, wide), connectivity=8, ltype=cv2.CV_16U
         )
         if n <= 1:
             return None
@@ -353,7 +367,7 @@ class MarkerDetector:
         lab = gather(labels, wy0, wx0, (sy, sx))
         core = lab == (idx + 1).astype(labels.dtype)[:, None, None]
         # the paper's test: each blob's colour histogram against the reference
-        sims = self.colour.similarities(gather(hsv, wy0, wx0, (sy, sx)), core)
+        sims = self.colour.similarities(gather(hsv, wy0, wx0, (sy, sx)), core, wide)
         good = sims >= cfg.min_similarity
         if not good.any():
             return None
@@ -488,125 +502,3 @@ class MarkerDetector:
                      st.similarity[[k, k]], st.border[[k, k]])
         self._measure(two)
         return [self._blob(two, j, expected, "split") for j in range(2)]
-
-    # ---------------------------------------------------------------------------- learning
-
-    def learn_markers(self, bgr: np.ndarray, uv: np.ndarray) -> None:
-        """Refine the marker reference histogram and the skin model from labelled markers.
-
-        ``uv`` (N,2): the centres of known markers in ``bgr`` (the tracker passes the six it
-        initialised on). Around each, the marker is segmented by colour alone (pixels closer to
-        the colour at its centre than to the surrounding skin, connected to the centre), so this
-        works even when the current reference no longer matches (a white-balance change); the
-        markers' pixels give the new reference, the hand between and around them (markers
-        excluded) gives the subject's skin chroma. Markers that do not stand out are skipped;
-        if none does, the models stay as they were (:attr:`learned_count` says how many were
-        used): a refinement that cannot be made must not stop a recording.
-        """
-        masks = self._labelled_masks(bgr, uv, "learn_markers")
-        self.learned_count = 0 if masks is None else masks[2]
-        if masks is None:
-            return
-        marker, skin, _ = masks
-        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-        self.colour.set_learned(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
-        self.skin.learn(bgr, skin)
-        self._mean_colours(bgr, marker, skin, 1.0)
-
-    def adapt(self, bgr: np.ndarray, uv: np.ndarray) -> bool:
-        """Follow a slow change of the marker and skin colours from confidently labelled markers.
-
-        ``uv`` (N,2): centres of markers the tracker labelled with confidence in ``bgr`` (NaN
-        rows are skipped). Their histogram is blended into the learned marker reference and the
-        hand around them into the skin model, each with a bounded drift from what
-        :meth:`learn_markers` learned (see :mod:`wristtrack.detect.marker_colour` and
-        :meth:`wristtrack.detect.skin.SkinModel.adapt`); the default marker colour stays in use
-        beside the learned one. Needs at least 3 markers that stand out; True if a model changed.
-        """
-        masks = self._labelled_masks(bgr, uv, "adapt")
-        if masks is None or masks[2] < 3:
-            return False
-        marker, skin, _ = masks
-        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-        changed = self.colour.adapt(smooth(hs_histogram(hsv, marker, self.config.hist_bins)))
-        changed = self.skin.adapt(bgr, skin) or changed
-        if changed:
-            self._mean_colours(bgr, marker, skin, 0.1)
-        self.adapted_count += changed
-        return changed
-
-    def _mean_colours(self, bgr, marker, skin, rate: float) -> None:
-        """Blend the mean BGR of the marker and skin masks into marker_bgr / skin_bgr."""
-        for name, mask in (("marker_bgr", marker), ("skin_bgr", skin)):
-            px = bgr[mask > 0]
-            if len(px):
-                new = px.mean(axis=0)
-                old = getattr(self, name)
-                setattr(self, name, new if old is None else (1 - rate) * old + rate * new)
-
-    def _labelled_masks(self, bgr: np.ndarray, uv: np.ndarray, caller: str):
-        """(marker mask, skin mask, markers used) around the labelled marker centres ``uv``, or
-        None when no marker stands out. The skin is the hand around the markers used (their
-        convex hull grown by two marker diameters), the markers themselves (grown) cut out."""
-        self._check(bgr, None)
-        try:
-            uv = np.asarray(uv, dtype=float).reshape(-1, 2)
-        except (TypeError, ValueError):
-            raise InputError(
-                f"{caller}: marker positions must be an (N, 2) array of pixels, got {uv!r}"
-            ) from None
-        h, w = bgr.shape[:2]
-        r = self.config.learn_radius_px
-        marker = np.zeros((h, w), np.uint8)
-        radii, used = [], []
-        for u, v in uv:
-            if not (np.isfinite(u) and np.isfinite(v)):
-                continue
-            cu, cv_ = int(round(u)), int(round(v))
-            x0, y0 = max(cu - r, 0), max(cv_ - r, 0)
-            x1, y1 = min(cu + r + 1, w), min(cv_ + r + 1, h)
-            if not (x0 <= cu < x1 and y0 <= cv_ < y1):
-                continue
-            seg = _segment_marker(bgr[y0:y1, x0:x1].astype(np.float32), cu - x0, cv_ - y0)
-            if seg is not None:
-                marker[y0:y1, x0:x1] |= seg
-                radii.append(math.sqrt(np.count_nonzero(seg) / math.pi))
-                used.append((cu, cv_))
-        if not radii:
-            return None
-        rad = float(np.median(radii))
-        skin = np.zeros((h, w), np.uint8)
-        if len(used) >= 3:
-            cv2.fillConvexPoly(skin, cv2.convexHull(np.array(used, np.int32)), 1)
-        else:
-            for c in used:
-                skin[c[1], c[0]] = 1
-        skin = cv2.dilate(skin, cv2.getStructuringElement(
-            cv2.MORPH_ELLIPSE, (int(4 * rad) | 1, int(4 * rad) | 1)))
-        grown = cv2.dilate(marker, cv2.getStructuringElement(
-            cv2.MORPH_ELLIPSE, (int(2 * rad) | 1, int(2 * rad) | 1)))
-        skin[grown > 0] = 0
-        return marker, skin, len(radii)
-
-
-def _segment_marker(patch: np.ndarray, cu: int, cv_: int) -> np.ndarray | None:
-    """0/1 mask of the marker at (cu, cv_) in a float BGR patch, or None if it does not stand
-    out: pixels nearer the centre colour than the border colour, connected to the centre."""
-    m = np.median(patch[max(cv_ - 1, 0) : cv_ + 2, max(cu - 1, 0) : cu + 2].reshape(-1, 3), 0)
-    border = np.concatenate((patch[0], patch[-1], patch[:, 0], patch[:, -1]))
-    b = np.median(border, 0)
-    d = m - b
-    dd = float(d @ d)
-    if dd < 30.0**2:  # no colour contrast with the surroundings worth learning from
-        return None
-    t = (patch - b) @ (d / dd)
-    n, labels = cv2.connectedComponents((t > 0.5).view(np.uint8), connectivity=8)
-    lab = labels[cv_, cu]
-    if lab == 0:
-        return None
-    seg = (labels == lab).astype(np.uint8)
-    # touching the patch border: not an isolated marker (a blue sleeve, a wrong label)
-    if seg[0].any() or seg[-1].any() or seg[:, 0].any() or seg[:, -1].any():
-        return None
-    return seg
-

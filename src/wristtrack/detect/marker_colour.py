@@ -5,9 +5,11 @@ one light). Once the hand turns away from the light (pronation, extension) the m
 darken and their hue and saturation spread with the sensor noise: a narrow learned histogram
 rejects them, while the wide default (a Gaussian around the nominal blue) still finds them. So:
 
-- the default reference is never dropped: marker pixels are those either reference accepts
-  (the back-projection table is the maximum of the two, each scaled to a peak of 255), and a
-  blob's Bhattacharyya coefficient is the larger of its two coefficients;
+- the default reference is never dropped: where the learned one finds fewer markers than the
+  frame before, the detector searches again with both (:attr:`MarkerColour.wide_table`, the
+  maximum of the two tables, each scaled to a peak of 255; a blob's Bhattacharyya coefficient
+  the larger of its two). Not always both: the wider table lets a marker's darker fringe into
+  its core, which moves its centre a little (rendered RGB-only: 0.91 -> 1.03 deg);
 - the learned reference keeps adapting, but only from markers the tracker labelled confidently
   (:meth:`MarkerColour.adapt`), as a running blend whose distance from the first learned
   histogram is bounded (Bhattacharyya coefficient >= ``min_anchor_similarity``): a slow drift
@@ -50,6 +52,7 @@ class MarkerColour:
         self.anchor: np.ndarray | None = None  # the first learned histogram, normalised
         self._blend: np.ndarray | None = None  # the running blend, normalised
         self.table = backprojection_table(self.default, min_value)
+        self.wide_table = self.table  # learned or default: see the module doc
 
     @property
     def reference(self) -> np.ndarray:
@@ -63,7 +66,9 @@ class MarkerColour:
 
     def _use(self, hist: np.ndarray) -> None:
         self.learned = lut_scaled(hist)
-        self.table = backprojection_table(np.maximum(self.learned, self.default), self.min_value)
+        self.table = backprojection_table(self.learned, self.min_value)
+        self.wide_table = backprojection_table(np.maximum(self.learned, self.default),
+                                               self.min_value)
 
     def adapt(self, hist: np.ndarray, rate: float = ADAPT_RATE,
               min_anchor_similarity: float = MIN_ANCHOR_SIMILARITY) -> bool:
@@ -84,9 +89,11 @@ class MarkerColour:
         self._use(blend)
         return True
 
-    def similarities(self, hsv: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    def similarities(self, hsv: np.ndarray, masks: np.ndarray, wide: bool = False) -> np.ndarray:
         """(n,) Bhattacharyya coefficient of each blob (see colour.blob_similarities) with the
-        reference that suits it best: the learned one or the default."""
+        reference in use; ``wide``: with the one that suits it best, learned or default."""
         if self.learned is None:
             return blob_similarities(hsv, masks, self.default)
+        if not wide:
+            return blob_similarities(hsv, masks, self.learned)
         return blob_similarities(hsv, masks, self.default, self.learned)
