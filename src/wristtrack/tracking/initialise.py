@@ -17,6 +17,7 @@ from wristtrack.errors import ConfigError, InitialisationError
 from wristtrack.hand import MARKER_NAMES, HandLayout, estimate_layout
 from wristtrack.tracking.labelling import MAX_RMS_PX, label_and_fit
 from wristtrack.tracking.pose_fit import initial_guess, refine_pose
+from wristtrack.tracking.side import label_either_side
 
 
 @dataclass(frozen=True)
@@ -65,8 +66,9 @@ def initialise(
     """Label the markers (unless ``labels`` is given) and solve the initial hand -> camera pose.
 
     Without ``layout`` (no hand.json) depth is required: the blobs are labelled with
-    ``HandLayout.default()`` as a shape template, the subject's layout is estimated from the
-    back-projected marker centres (``hand.estimate_layout``), and the pose refined with it.
+    ``HandLayout.default()`` and its mirror image as shape templates (the side is found from
+    the image), the subject's layout is estimated from the back-projected marker centres
+    (``hand.estimate_layout``, heights kept), and the pose refined with it.
     """
     uv, depth = detections.uv, detections.depth
     M = uv.shape[0]
@@ -77,15 +79,9 @@ def initialise(
                 "registered depth so the layout can be measured"
             )
         if labels is None:
-            labels, _ = label_and_fit(
-                uv,
-                depth,
-                camera,
-                HandLayout.default(),
-                pixel_sigma=pixel_sigma,
-                template=True,
-                max_rms_px=max_rms_px,
-            )
+            # either hand: the right template and its mirror image (tracking/side.py)
+            labels, _, _ = label_either_side(detections, camera, pixel_sigma=pixel_sigma,
+                                             max_rms_px=max_rms_px)
         idx = _marker_blobs(labels, M)
         missing = [
             name

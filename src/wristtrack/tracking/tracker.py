@@ -5,7 +5,9 @@ A small state machine: ``initialising`` until the least-squares initialisation s
 many frames with too few markers or too many updates in a row whose normalised innovation
 squared is beyond its chi-square bound, from where it re-initialises by itself by fitting the
 layout.
-The fixed frame W0 is the hand frame of the first initialisation and never moves afterwards.
+The fixed frame W0 is the hand frame of the first initialisation, refined once at the end of
+the still start that follows it (tracking/neutral.py: W0 fitted to all the still frames, and
+without hand.json the layout averaged over them); it never moves afterwards.
 
 Each tracking frame is one filter step: predict, associate, update. The generic path
 (``Tracker._generic_frame``) is the reference and reads like the paper; for the default
@@ -29,10 +31,11 @@ from wristtrack.errors import InitialisationError, InputError
 from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import so3_log
-from wristtrack.hand import HandLayout
+from wristtrack.hand import HandLayout, fit_pose
 from wristtrack.tracking import compiled
 from wristtrack.tracking.initialise import initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel, ProcessNoise
+from wristtrack.tracking.neutral import StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
 from wristtrack.tracking.results import FrameResult, Status
 
@@ -118,6 +121,11 @@ class Tracker:
         self.status = Status.INITIALISING
         self.last_init_error: str | None = None
         self.max_blobs_seen = 0  # most blobs in a frame offered for initialisation
+        # the still start (tracking/neutral.py): the layout measured without hand.json and W0
+        # averaged over the first still frames; W0's covariance joins every relative pose's
+        self._still: StillStart | None = None
+        self._layout_measured = self.layout is None
+        self.w0_cov = np.zeros((6, 6))
 
     def __getstate__(self) -> dict:
         """Pickled without the compiled step: a numba function whose helpers are compiled only
@@ -160,9 +168,11 @@ class Tracker:
         except InitialisationError as e:
             self.last_init_error = str(e)  # why the latest attempt failed, for the run's report
             return self._empty(det, self.status)
-        if self.R_c0 is None:  # the first initialisation fixes W0 for good
+        if self.R_c0 is None:  # the first initialisation fixes W0 (refined by the still start)
             self.R_c0, self.t_c0 = init.R_ch, init.t_ch
             self.layout = init.layout
+            if type(self.model) is ConstantRateModel:
+                self._still = StillStart(self.camera)
         R = self.R_c0.T @ init.R_ch
         p = self.R_c0.T @ (init.t_ch - self.t_c0)
         # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
@@ -175,6 +185,22 @@ class Tracker:
         self.status = Status.TRACKING
         n_markers = int(np.sum(init.labels >= 0))
         return self._result(det, Status.TRACKING, init.labels, n_markers, np.nan, 0)
+
+    def _end_still_start(self, track: _Track) -> None:
+        """The layout averaged over the still start (when it was measured, not given) and W0
+        fitted to all its frames at once; the state re-expressed in them (tracking/neutral.py).
+        Rows already written keep the first frame's W0 (they differ by W0's correction)."""
+        still, self._still = self._still, None
+        new = (still.layout() if self._layout_measured else None) or self.layout
+        # the start of the W0 fit: W0 moved into the new layout's hand frame
+        T_R, T_t = fit_pose(self.layout, new.points)
+        w0 = still.w0(new, self.R_c0 @ T_R, self.t_c0 + self.R_c0 @ T_t)
+        track.x, track.P, self.R_c0, self.t_c0, self.w0_cov = reanchor(
+            track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0)
+        track.R_prev = track.x[:9].reshape(3, 3)
+        self.layout = new
+        self._obs = {}  # observation and compiled constants hold the layout and W0
+        self._compiled, self._compiled_usable = None, None
 
     def _observation(self, use_depth: bool) -> MarkerObservation:
         if use_depth not in self._obs:
@@ -205,6 +231,8 @@ class Tracker:
                 self._lose()  # the estimate no longer explains the markers: start again
                 return self._empty(det, Status.LOST)
         track.x, track.P, track.timestamp = x, P, det.timestamp
+        if self._still is not None and self._still.add(det, labels, *self.model.velocities(x)):
+            self._end_still_start(track)
         status = Status.TRACKING if n_assoc else Status.COASTING
         self.status = status
         one_to_one = cfg.association == "gnn"  # then the blobs not taken are the clutter
@@ -353,8 +381,9 @@ class Tracker:
         if n_clutter is None:
             n_clutter = int(np.sum(labels < 0))
         var = track.P.diagonal()
-        rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum(), 0.0)))
-        pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum(), 0.0))
+        w0 = self.w0_cov.diagonal()  # W0's own uncertainty is part of every relative pose's
+        rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum() + w0[:3].sum(), 0.0)))
+        pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum() + w0[3:].sum(), 0.0))
         return FrameResult(
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
             R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels, n_visible=n_assoc,
