@@ -287,7 +287,7 @@ def accuracy_sections(
     ]
 
 
-def _lead_line(acc: dict, ours: set, where: str) -> str:
+def lead_line(acc: dict, ours: set, where: str) -> str:
     """Per peer: on how many scenarios the default is ahead (orientation and position errors
     both lower by more than TIE), tied, or behind (either higher by more than TIE)."""
     names = [n for n in acc if DEFAULT in acc[n]]
@@ -329,12 +329,10 @@ def _lead_line(acc: dict, ours: set, where: str) -> str:
 
 
 def summary_lines(f: dict) -> list[str]:
-    """Plain-language findings on the peers and the bound, from ``accuracy_sections``' (and
-    ``rendered_sections``') findings."""
+    """Plain-language findings on the peers and the bound, from ``accuracy_sections``'
+    findings (the rendered recordings' lead line is the rendered section's)."""
     acc, bounds, ours = f["accuracy"], f["bounds"], set(f["ours"])
-    out = [_lead_line(acc, ours, "same detections, measurement-level simulator")]
-    if f.get("rendered_accuracy"):
-        out.append(_lead_line(f["rendered_accuracy"], ours, "rendered RGB-D recordings"))
+    out = [lead_line(acc, ours, "same detections, measurement-level simulator")]
     ratios = {n: b[6] / b[4] for n, b in bounds.items() if np.isfinite(b[6] / b[4])}
     worst = max(ratios, key=ratios.get)
     met = all(r <= 1.5 for r in ratios.values())
