@@ -1,0 +1,7 @@
+"""``python -m wristtrack.cli``."""
+
+import sys
+
+from wristtrack.cli import main
+
+sys.exit(main())

@@ -1,0 +1,33 @@
+"""Options and argument types shared by several commands."""
+
+from __future__ import annotations
+
+import argparse
+
+from wristtrack.filter.associate import METHODS
+from wristtrack.tracking.models import MODELS
+
+
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text} is not a whole number >= 1")
+    return value
+
+
+def add_tracker_options(parser: argparse.ArgumentParser) -> None:
+    """--model, --association and --no-depth, read back by :func:`tracker_config`."""
+    parser.add_argument("--model", choices=sorted(MODELS), default="default")
+    parser.add_argument("--association", choices=METHODS, default="gnn")
+    parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
+
+
+def tracker_config(args: argparse.Namespace):
+    """The TrackerConfig the options of :func:`add_tracker_options` ask for."""
+    from wristtrack.tracking.tracker import TrackerConfig
+
+    if args.model in ("paper", "paper_rpy"):
+        return TrackerConfig.paper(model=args.model)
+    return TrackerConfig(association=args.association, use_depth=not args.no_depth)
+
+
