@@ -17,8 +17,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from wristtrack.io.live_replay import ReplayRecording
-from wristtrack.pipeline.live import track_live
+from wristtrack.io.live.replay import ReplayRecording
+from wristtrack.pipeline.live.loop import track_live
 from wristtrack.sim.render import render_recording
 
 SCENARIOS = ("reach", "flexion", "hard")

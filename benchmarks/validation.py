@@ -79,7 +79,7 @@ def round_trip(cache: Path, name: str, file: str, cluster: str, options: dict,
                offset_given: bool = False, folder: Path = KTK) -> dict:
     """Render, track (--smooth), evaluate and compare (markers and cluster) one motion;
     ``offset_given``: compare with the planted offset as a synchronised lab would know it."""
-    from wristtrack.analysis.compare import compare
+    from wristtrack.analysis.compare.comparison import compare
     from wristtrack.analysis.evaluate import evaluate
     from wristtrack.cli import main
     from wristtrack.errors import WristtrackError
@@ -183,7 +183,7 @@ def _stress_rows(trips: list[dict]) -> list[str]:
 
 def real_file_rows() -> list[str]:
     """What the importers read from each real file with hand or wrist markers."""
-    from wristtrack.analysis.compare_reference import cluster_shape, rigid_fit
+    from wristtrack.analysis.compare.reference import cluster_shape, rigid_fit
     from wristtrack.io.markers.read import read_markers
 
     clusters = {

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from wristtrack.analysis.compare import compare
+from wristtrack.analysis.compare.comparison import compare
 from wristtrack.cli import main
 from wristtrack.errors import InputError
 from wristtrack.geometry import rotation_distance
@@ -214,7 +214,7 @@ def test_a_still_reference_cannot_be_aligned(scene, tmp_path):
 
 
 def test_implausible_results_are_flagged():
-    from wristtrack.analysis.compare import _warnings
+    from wristtrack.analysis.compare.comparison import _warnings
 
     ok = {"clock_ratio": 1.0002, "speed_correlation": 0.9, "frames_registered": 100,
           "frames_compared": 100}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wristtrack.analysis.compare_stats import (
+from wristtrack.analysis.compare.stats import (
     bland_altman,
     icc2_1,
     icc21,

@@ -21,9 +21,9 @@ import pytest
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io import live as live_module
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.folder import RecordingWriter
+from wristtrack.io.live import opencv as live_module
 from wristtrack.io.open import open_recording
 from wristtrack.io.ros_messages import IMAGE, RosMessage, decode_colour, decode_depth
 

@@ -20,7 +20,7 @@ from wristtrack.errors import InputError
 from wristtrack.io.base import Recording
 from wristtrack.io.folder import FolderRecording
 from wristtrack.io.poses import read_poses
-from wristtrack.pipeline.live import Captured, NewestFrameSlot, track_live
+from wristtrack.pipeline.live.loop import Captured, NewestFrameSlot, track_live
 from wristtrack.pipeline.track import track_recording
 
 ANGLES = ("deviation_deg", "flexion_deg", "pronation_deg")

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from wristtrack.errors import InputError
-from wristtrack.io.live_replay import ReplayRecording
+from wristtrack.io.live.replay import ReplayRecording
 from wristtrack.io.poses import read_poses
-from wristtrack.pipeline.live import track_live
-from wristtrack.pipeline.live_view import LiveView
+from wristtrack.pipeline.live.loop import track_live
+from wristtrack.pipeline.live.view import LiveView
 
 AXES = ("deviation", "flexion", "pronation")
 

@@ -50,7 +50,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from wristtrack.analysis.compare import compare, format_comparison
+    from wristtrack.analysis.compare.comparison import compare, format_comparison
     from wristtrack.report.comparison import write_comparison
 
     result = compare(args.run_dir, args.reference, markers=args.markers, cluster=args.cluster,

@@ -96,8 +96,8 @@ def _track_live(args: argparse.Namespace) -> int:
 
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
-    from wristtrack.io.live_sources import open_live
-    from wristtrack.pipeline.live import track_live
+    from wristtrack.io.live.sources import open_live
+    from wristtrack.pipeline.live.loop import track_live
 
     if args.input:
         raise WristtrackError(f"give a recording ({args.input}) or --live SOURCE, not both")
@@ -116,7 +116,7 @@ def _track_live(args: argparse.Namespace) -> int:
             _overlay(args.overlay, source) as overlay, contextlib.ExitStack() as stack:
         view = None
         if args.view:
-            from wristtrack.pipeline.live_view import DEFAULT_PORT, LiveView
+            from wristtrack.pipeline.live.view import DEFAULT_PORT, LiveView
 
             layout = source.hand.points if source.hand is not None else None
             port = DEFAULT_PORT if args.port is None else args.port

@@ -13,7 +13,7 @@ from wristtrack.errors import InputError
 from wristtrack.hand import HandLayout
 from wristtrack.io.base import Recording, reject_options
 from wristtrack.io.folder import FolderRecording
-from wristtrack.io.live import LiveRecording
+from wristtrack.io.live.opencv import LiveRecording
 from wristtrack.io.rosbag import BagRecording
 from wristtrack.io.video import VIDEO_SUFFIXES, VideoRecording
 

@@ -14,7 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from wristtrack import __version__
-from wristtrack.analysis.compare import Comparison, comparison_json
+from wristtrack.analysis.compare.comparison import Comparison, comparison_json
 from wristtrack.io.atomic import write_bytes_atomic, write_text_atomic
 from wristtrack.report.figures import AXIS_COLOURS, AXIS_NAMES, WIDTH_IN, figure_png
 

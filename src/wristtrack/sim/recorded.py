@@ -31,7 +31,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from wristtrack import geometry
-from wristtrack.analysis.compare_reference import rigid_fit
+from wristtrack.analysis.compare.reference import rigid_fit
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import MARKER_NAMES
 from wristtrack.io.markers.read import read_markers

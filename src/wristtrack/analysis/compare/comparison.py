@@ -1,10 +1,10 @@
 """``wristtrack compare RUN_DIR REFERENCE``: agreement of a run with a reference system.
 
 The reference (C3D, TRC, Qualisys TSV or a simulated truth.csv) becomes a pose per reference
-frame (:mod:`compare_reference`); the clocks are aligned coarsely on the speed profiles
-(:mod:`compare_align`) and then jointly with the rigid registration camera -> lab
-(:mod:`compare_register`); the agreement is reported as validation studies do
-(:mod:`compare_stats`). comparison.json keys follow DESIGN.md section 3 (a contract).
+frame (:mod:`.reference`); the clocks are aligned coarsely on the speed profiles
+(:mod:`.align`) and then jointly with the rigid registration camera -> lab
+(:mod:`.register`); the agreement is reported as validation studies do
+(:mod:`.stats`). comparison.json keys follow DESIGN.md section 3 (a contract).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from wristtrack.analysis.compare_align import CoarseAlignment, coarse_offset, speed
-from wristtrack.analysis.compare_reference import (
+from wristtrack.analysis.compare.align import CoarseAlignment, coarse_offset, speed
+from wristtrack.analysis.compare.reference import (
     Interpolator,
     ReferencePoses,
     from_cluster,
@@ -25,8 +25,8 @@ from wristtrack.analysis.compare_reference import (
     from_truth,
     parse_mapping,
 )
-from wristtrack.analysis.compare_register import Registration, register
-from wristtrack.analysis.compare_stats import bland_altman, icc21, range_difference, rmse
+from wristtrack.analysis.compare.register import Registration, register
+from wristtrack.analysis.compare.stats import bland_altman, icc21, range_difference, rmse
 from wristtrack.analysis.kinematics import analyse
 from wristtrack.analysis.range_of_motion import AXES
 from wristtrack.errors import ConfigError, InputError

@@ -1,6 +1,6 @@
 """``--view``: a live page on 127.0.0.1 while ``wristtrack track --live`` runs.
 
-A standard-library HTTP server in its own threads serves one static page (``live_page.PAGE``,
+A standard-library HTTP server in its own threads serves one static page (``page.PAGE``,
 no external resources: it works offline in any browser), the newest overlay frame as a JPEG
 (``/frame.jpg``: blobs, marker names, wrist axes, as in ``--overlay``) and the running numbers
 as JSON (``/state.json?since=N``: status, frame rate, latency, drops, range of motion so far and
@@ -30,7 +30,7 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import InputError
 from wristtrack.geometry import wrist_angles
-from wristtrack.pipeline.live_page import PAGE
+from wristtrack.pipeline.live.page import PAGE
 from wristtrack.report.overlay import OverlayWriter
 
 HOST = "127.0.0.1"  # never another interface: the page shows a patient

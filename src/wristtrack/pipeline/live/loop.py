@@ -34,7 +34,7 @@ from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError, WristtrackError
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
-from wristtrack.io.live_record import LiveRecorder
+from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.track import _learn, _no_initialisation, _settings, _skipped_row
@@ -239,7 +239,7 @@ def track_live(
     """Track ``source`` in real time into ``out`` (poses.csv, summary.json, live.json).
 
     ``record``: also write every captured frame as a recording folder there. ``view`` (a
-    live_view.LiveView) and ``overlay`` (a report.overlay.OverlayWriter) receive each processed
+    view.LiveView) and ``overlay`` (a report.overlay.OverlayWriter) receive each processed
     frame with its detections and estimate, after its latency is taken. ``max_seconds`` ends
     the session after that much wall time. Returns (summary, live log) as written.
     """

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from wristtrack.analysis.compare_reference import Interpolator
+from wristtrack.analysis.compare.reference import Interpolator
 from wristtrack.errors import InputError
 from wristtrack.geometry import project_to_so3, skew, so3_exp, so3_log
 

@@ -33,17 +33,17 @@ def open_live(
     if kind == "replay":
         if not arg:
             raise InputError("replay: needs a recording folder, e.g. --live replay:rec/")
-        from wristtrack.io.live_replay import ReplayRecording
+        from wristtrack.io.live.replay import ReplayRecording
 
         return ReplayRecording(arg, camera, hand, **options)
     if kind == "realsense":
-        from wristtrack.io.realsense import RECORDING_SUFFIXES, RealSenseRecording
+        from wristtrack.io.live.realsense import RECORDING_SUFFIXES, RealSenseRecording
 
         if arg and (Path(arg).suffix.lower() in RECORDING_SUFFIXES or Path(arg).is_file()):
             return RealSenseRecording(None, camera, hand, file=arg, **options)
         return RealSenseRecording(arg or None, camera, hand, **options)
     if kind == "openni":
-        from wristtrack.io.openni import OpenNIRecording
+        from wristtrack.io.live.openni import OpenNIRecording
 
         if arg and (arg.lower().endswith(".oni") or Path(arg).is_file()):
             return OpenNIRecording(None, camera, hand, file=arg, **options)
@@ -53,7 +53,7 @@ def open_live(
         return open_live(f"{'openni' if suffix == '.oni' else 'realsense'}:{spec}", camera, hand,
                          **options)
     if spec.lstrip("-").isdigit() or spec.startswith(("/dev/", "rtsp://", "http://", "https://")):
-        from wristtrack.io.live import LiveRecording
+        from wristtrack.io.live.opencv import LiveRecording
 
         return LiveRecording(spec, camera, hand, **options)
     raise InputError(f"--live {spec}: unknown source; give {KINDS}")

@@ -1,4 +1,4 @@
-"""The live view's page (served by live_view): one self-contained HTML file, no external
+"""The live view's page (served by pipeline.live.view): one self-contained HTML file, no external
 resources, plain JavaScript that polls ``state.json`` and ``frame.jpg`` and draws the angle
 traces on a canvas."""
 
