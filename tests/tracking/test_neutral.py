@@ -10,10 +10,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import depth_sigma
 from wristtrack.hand import HandLayout, estimate_layout, fit_pose
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import Trajectory
-from wristtrack.tracking.neutral import StillStart, reanchor
+from wristtrack.tracking.neutral import STILL_PX, StillStart, reanchor
+from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.pose_fit import initial_guess, refine_pose
 
 
@@ -56,7 +58,9 @@ def test_still_start_w0_and_layout_beat_one_frame():
         uv = first.detections.uv[np.argsort(first.labels)]
         z = first.detections.depth[np.argsort(first.labels)]
         R0, t0 = initial_guess(uv, z, cam, layout)
-        fit = refine_pose(uv, z, cam, layout, R0, t0)
+        noise = MeasurementNoise()  # weighted as the still start weighs them
+        fit = refine_pose(uv, z, cam, layout, R0, t0, noise.pixel_sigma,
+                          depth_sigma(z, noise.depth_coeff, noise.depth_floor))
         one_rot.append(angle_deg(fit.R_ch, R))
         R_w, t_w, cov = still.w0(layout, R0, t0)
         many_rot.append(angle_deg(R_w, R))
@@ -73,13 +77,20 @@ def test_still_start_w0_and_layout_beat_one_frame():
 
 def test_still_start_ends_when_the_hand_moves_and_needs_enough_frames():
     cam, layout = Camera.default(), arched()
-    _, _, frames = still_frames(layout, np.random.default_rng(1), n=4)
+    _, _, frames = still_frames(layout, np.random.default_rng(1), n=5)
     still = StillStart(cam)
     for f in frames[:3]:
-        still.add(f.detections, f.labels, np.zeros(3), np.zeros(3))
-    assert still.add(frames[3].detections, frames[3].labels, np.array([0.1, 0, 0]), np.zeros(3))
+        assert not still.add(f.detections, f.labels, np.zeros(3), np.zeros(3))
+    # the markers shifted by more than STILL_PX: the hand has started to move
+    det = frames[3].detections
+    moved = type(det)(det.timestamp, det.uv + [STILL_PX + 1.0, 0.0], det.depth)
+    assert still.add(moved, frames[3].labels, np.zeros(3), np.zeros(3))
     assert still.layout() is None  # 3 frames: too few to replace the one-frame layout
     assert still.w0(layout, np.eye(3), np.array([0, 0, 0.6])) is None
+    # or the filter sees it move fast
+    other = StillStart(cam)
+    other.add(frames[0].detections, frames[0].labels, np.zeros(3), np.zeros(3))
+    assert other.add(frames[1].detections, frames[1].labels, np.array([0.3, 0, 0]), np.zeros(3))
 
 
 def test_reanchor_keeps_the_markers_where_they_are():

@@ -22,15 +22,18 @@ from __future__ import annotations
 import numpy as np
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import depth_sigma
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import ConfigError, InitialisationError, InputError
 from wristtrack.geometry import skew
 from wristtrack.hand import HandLayout, average_layout, fit_pose
+from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.pose_fit import refine_pose
 
 STILL_FRAMES = 15  # frames averaged (0.5 s at 30 fps: the paper's still start)
 MIN_FRAMES = 5  # fewer usable frames before the hand moves: keep the one-frame layout
-STILL_SPEED = 0.03  # m/s; faster and the hand has started to move
+STILL_PX = 2.5  # markers this far (px, median) from where the still start found them: moving
+STILL_SPEED = 0.03  # m/s; or the filter sees the hand move this fast
 STILL_RATE = 0.25  # rad/s
 
 
@@ -50,13 +53,18 @@ class StillStart:
         True once the still start is over (enough frames, or the hand started moving)."""
         if self.closed:
             return True
-        if (np.linalg.norm(v) > STILL_SPEED or np.linalg.norm(w) > STILL_RATE
-                or len(self.frames) >= self.n_frames):
-            self.closed = True
-            return True
         blobs = np.flatnonzero(labels >= 0)
         uv, z = np.full((6, 2), np.nan), np.full(6, np.nan)
         uv[labels[blobs]] = det.uv[blobs]
+        moved = 0.0
+        if self.uv:  # the markers' median displacement: robust to one blob's noise
+            d = np.linalg.norm(uv - self.uv[0], axis=1)
+            if np.isfinite(d).any():
+                moved = float(np.nanmedian(d))
+        if (moved > STILL_PX or np.linalg.norm(v) > STILL_SPEED or np.linalg.norm(w) > STILL_RATE
+                or len(self.uv) >= self.n_frames):
+            self.closed = True
+            return True
         if det.depth is not None:
             z[labels[blobs]] = det.depth[blobs]
         self.uv.append(uv)
@@ -76,18 +84,24 @@ class StillStart:
             return None
 
 
-    def w0(self, layout: HandLayout, R0: np.ndarray, t0: np.ndarray):
+    def w0(self, layout: HandLayout, R0: np.ndarray, t0: np.ndarray,
+           noise: MeasurementNoise | None = None):
         """(R_ch, t_ch, cov (6,6)) of the hand over the still start with ``layout``: one pose
-        fitted to every frame's markers (start R0, t0), or None with too few frames or no fit.
+        fitted to every frame's markers (start R0, t0), weighted as the filter weighs them
+        (``noise``: its pixel sigma and depth model, floor included: a structured-light
+        camera's depth errors are correlated in time too, so more frames do not make depth
+        sharper than that floor); None with too few frames or no fit.
         """
         if len(self.uv) < MIN_FRAMES:
             return None
         n = len(self.uv)
         stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times
+        noise = noise or MeasurementNoise()
         depth = np.concatenate(self.depth)
+        sz = depth_sigma(np.nan_to_num(depth, nan=1.0), noise.depth_coeff, noise.depth_floor)
         try:
             fit = refine_pose(np.concatenate(self.uv), depth, self.camera, stacked, R0, t0,
-                              depth_sigma=None if np.isfinite(depth).any() else 1.0)
+                              noise.pixel_sigma, sz)
         except InitialisationError:
             return None
         return fit.R_ch, fit.t_ch, fit.cov

@@ -43,7 +43,9 @@ class FrameResult:
     pos_sigma_mm: float = np.nan  # 1-sigma position uncertainty (root of the variance trace)
     rot_sigma_deg: float = np.nan  # 1-sigma orientation uncertainty
     x: np.ndarray | None = None  # the filter state (model.initial_state layout); for smoothing
-    track_id: int = -1  # which initialisation this estimate descends from (0 = the first)
+    # one continuous filter state: a new id at each initialisation and where the still start
+    # moves W0 (tracking/neutral.py); the smoother never smooths across two ids
+    track_id: int = -1
     side: str = "right"  # the hand's side (from its layout): signs of the anatomical angles
 
     @property

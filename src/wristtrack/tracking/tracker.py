@@ -126,6 +126,10 @@ class Tracker:
         self._still: StillStart | None = None
         self._layout_measured = self.layout is None
         self.w0_cov = np.zeros((6, 6))
+        # results' track_id: a new one at every initialisation and where the still start moves
+        # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
+        # never smooths across the change of frame
+        self._track_id = -1
 
     def __getstate__(self) -> dict:
         """Pickled without the compiled step: a numba function whose helpers are compiled only
@@ -182,6 +186,7 @@ class Tracker:
         P = self.model.initial_covariance(pose_cov)
         self._track = _Track(x, P, det.timestamp, R_prev=R)
         self._initialisations += 1
+        self._track_id += 1
         self.status = Status.TRACKING
         n_markers = int(np.sum(init.labels >= 0))
         return self._result(det, Status.TRACKING, init.labels, n_markers, np.nan, 0)
@@ -194,13 +199,14 @@ class Tracker:
         new = (still.layout() if self._layout_measured else None) or self.layout
         # the start of the W0 fit: W0 moved into the new layout's hand frame
         T_R, T_t = fit_pose(self.layout, new.points)
-        w0 = still.w0(new, self.R_c0 @ T_R, self.t_c0 + self.R_c0 @ T_t)
+        w0 = still.w0(new, self.R_c0 @ T_R, self.t_c0 + self.R_c0 @ T_t, self.config.measurement)
         track.x, track.P, self.R_c0, self.t_c0, self.w0_cov = reanchor(
             track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0)
         track.R_prev = track.x[:9].reshape(3, 3)
         self.layout = new
         self._obs = {}  # observation and compiled constants hold the layout and W0
         self._compiled, self._compiled_usable = None, None
+        self._track_id += 1
 
     def _observation(self, use_depth: bool) -> MarkerObservation:
         if use_depth not in self._obs:
@@ -388,7 +394,7 @@ class Tracker:
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
             R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels, n_visible=n_assoc,
             n_clutter=n_clutter, nis=nis, nis_dof=dof, pos_sigma_mm=pos_sigma,
-            rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._initialisations - 1,
+            rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._track_id,
             side=self.layout.side,
         )
 
