@@ -223,9 +223,10 @@ def test_realsense_distortion_is_read_from_the_recording(short, tmp_path):
 
 
 def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_file, tmp_path):
-    """Played at its own pace: on a loaded machine a frame may be dropped (by the SDK's
-    real-time playback or the newest-frame rule), so the poses are compared up to the first
-    frame missing."""
+    """Played at its own pace, as a camera: on a loaded machine a frame may be dropped (by the
+    SDK's real-time playback or the newest-frame rule), and the frames after a drop are
+    filtered with a longer step. So every tracked row is compared with the offline row of the
+    same frame within the filter's noise (~0.3 deg, ~0.5 mm), not digit for digit."""
     assert main(["track", "--live", f"realsense:{realsense_file}", "--out",
                  str(tmp_path / "live"), "--no-report"]) == 0
     assert main(["track", str(reach), "--out", str(tmp_path / "off"), "--no-report",
@@ -235,19 +236,15 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
     log = json.loads((tmp_path / "live" / "live.json").read_text())
     assert log["frames"]["total"] == len(live["frame"]) >= 10
     tracked = live["status"] == "tracking"
-    assert tracked.sum() >= 10
+    assert tracked.sum() >= 9
     # each live row is a frame of the recording, in order
     k = np.searchsorted(off["timestamp"], live["timestamp"] - 1e-6)
     np.testing.assert_allclose(off["timestamp"][k], live["timestamp"], atol=1e-6)
     assert (np.diff(k) > 0).all()
-    same = np.flatnonzero(~(tracked & (k == np.arange(len(k)))))
-    n = int(same[0]) if len(same) else len(k)  # rows before the first gap or drop
-    assert n >= 3
-    # The SDK stores the intrinsics (to ~1e-4 px) and the depth unit (1.00000005e-3 m) as
-    # float32; that moves the estimate (and the still-start W0 fitted to it) by a few hundredths
-    # of a millimetre, far below its noise (~0.3 deg, ~0.5 mm): a fifth of that is the bound.
-    np.testing.assert_allclose(live["tx"][:n], off["tx"][:n], atol=1e-4)
-    np.testing.assert_allclose(live["flexion_deg"][:n], off["flexion_deg"][:n], atol=0.06)
+    for col in ("tx", "ty", "tz"):
+        np.testing.assert_allclose(live[col][tracked], off[col][k[tracked]], atol=1e-3)
+    for col in ("deviation_deg", "flexion_deg", "pronation_deg"):
+        np.testing.assert_allclose(live[col][tracked], off[col][k[tracked]], atol=0.5)
 
 
 def test_realsense_without_a_device_or_library_is_one_line(monkeypatch, tmp_path):
