@@ -65,7 +65,7 @@ def time_tracker_step(n_frames: int = 300, seed: int = 0, stonesoup_frames: int 
     )  # fmt: skip
 
 
-def _time_steps(tracker: Tracker, frames) -> float:
+def _time_steps(tracker, frames) -> float:
     """Median time of the tracker's steps after the first (which initialises)."""
     first = tracker.step(frames[0])
     assert first.status == Status.TRACKING
@@ -83,15 +83,7 @@ def _time_stonesoup(frames, camera, layout) -> float | None:
         from benchmarks.peers.stonesoup_ukf import StoneSoupTracker
     except ImportError:
         return None
-    tracker = StoneSoupTracker(camera, layout)
-    first = tracker.step(frames[0])
-    assert first.status == Status.TRACKING
-    times = []
-    for det in frames[1:]:
-        start = time.perf_counter()
-        tracker.step(det)
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+    return _time_steps(StoneSoupTracker(camera, layout), frames)
 
 
 def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:

@@ -78,16 +78,7 @@ def _track(args: argparse.Namespace) -> int:
         from wristtrack.analysis.kinematics import format_reaches
 
         print(format_reaches(summary["kinematics"]))
-    # Exports last: they read the run folder's final poses.csv (smoothed, if asked for).
-    for fmt in dict.fromkeys(args.export or ()):
-        export_one(args.out, fmt, None, "mm")
-    if args.overlay:
-        print(f"wrote overlay video {args.overlay}")
-    if not args.no_report:
-        from wristtrack.report.html import write_report
-
-        print(f"wrote {write_report(args.out)} (figures in {args.out}/figures)")
-    return 0
+    return _write_outputs(args)
 
 
 def _track_live(args: argparse.Namespace) -> int:
@@ -135,6 +126,12 @@ def _track_live(args: argparse.Namespace) -> int:
         print(f"recorded {rec['frames']} frames to {rec['folder']}"
               + (f" ({rec['lost']} lost: {rec['error'] or 'the disk fell behind'})"
                  if rec["lost"] else ""))
+    return _write_outputs(args)
+
+
+def _write_outputs(args: argparse.Namespace) -> int:
+    """The exports, the overlay's line and the report of a finished run. Last, because they
+    read the run folder's final poses.csv (smoothed, if asked for)."""
     for fmt in dict.fromkeys(args.export or ()):
         export_one(args.out, fmt, None, "mm")
     if args.overlay:
