@@ -66,7 +66,7 @@ def track_recording(
     """
     out = _output_folder(out)
     config = config or TrackerConfig()
-    settings = {**_settings(config), "smoothed": bool(smooth)}
+    settings = {**settings_dict(config), "smoothed": bool(smooth)}
     manual_labels = None if labels is None else (
         labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
     )
@@ -150,7 +150,7 @@ class _Rows:
     bar: Any
 
     def skipped(self, index: int, timestamp: float, n_blobs: int, status: str) -> None:
-        self.writer.write(_skipped_row(index, timestamp, n_blobs, status))
+        self.writer.write(skipped_row(index, timestamp, n_blobs, status))
         self.states.write(index, timestamp, None)
 
     def tracked(self, index: int, timestamp: float, result: FrameResult) -> None:
@@ -208,10 +208,10 @@ def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None
     if result.frame != frame.index:  # after skipped frames: the recording's numbers
         result = replace(result, frame=frame.index)
     if not run.learned and result.status == Status.TRACKING:
-        _learn(run.detector, frame.bgr, det, result)
+        learn_colours(run.detector, frame.bgr, det, result)
         run.learned = True
     elif run.learned and frame.index % ADAPT_EVERY == 0 and _confident(result):
-        _learn(run.detector, frame.bgr, det, result, adapt=True)
+        learn_colours(run.detector, frame.bgr, det, result, adapt=True)
     rows.tracked(frame.index, frame.timestamp, result)
     if rows.overlay is not None:
         rows.overlay.add(frame.bgr, det, result)
@@ -255,7 +255,7 @@ def _finish(
         raise KeyboardInterrupt
     checkpoints.discard()  # complete
     if tracker.R_c0 is None:  # the outputs say so too, but a run with no pose is a failure
-        raise InitialisationError(_no_initialisation(recording, summary.frames, tracker))
+        raise InitialisationError(no_initialisation_message(recording, summary.frames, tracker))
     return data
 
 
@@ -294,7 +294,7 @@ def _note_bad(bar, bad_frames: list[dict[str, Any]], index: int, error: str) -> 
         )
 
 
-def _no_initialisation(recording: Recording, n_frames: int, tracker: Tracker) -> str:
+def no_initialisation_message(recording: Recording, n_frames: int, tracker: Tracker) -> str:
     """Why no frame of the run gave a first pose, in one line."""
     reason = tracker.last_init_error or "no frame could be read"
     if tracker.max_blobs_seen < 6:
@@ -321,7 +321,7 @@ def _confident(result: FrameResult) -> bool:
             and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
 
 
-def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
+def learn_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
            adapt: bool = False) -> None:
     """Refine the detector's colour models from the six labelled markers of the first fix, or
     (``adapt``) blend in the markers labelled in this frame."""
@@ -335,14 +335,14 @@ def _learn(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
         detector.learn_markers(bgr, uv)
 
 
-def _skipped_row(index: int, timestamp: float, n_blobs: int, status: str) -> list[str]:
+def skipped_row(index: int, timestamp: float, n_blobs: int, status: str) -> list[str]:
     return pose_row(
         index, timestamp, status, R_ch=_NAN33, t_ch=_NAN3, R=_NAN33, p=_NAN3, v=_NAN3, w=_NAN3,
         n_visible=0, n_clutter=n_blobs,
     )
 
 
-def _settings(config: TrackerConfig) -> dict[str, Any]:
+def settings_dict(config: TrackerConfig) -> dict[str, Any]:
     def clean(value):
         if isinstance(value, dict):
             return {k: clean(v) for k, v in value.items()}

@@ -37,7 +37,12 @@ from wristtrack.io.base import Frame, Recording
 from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.pipeline.interrupt import DeferredInterrupt
-from wristtrack.pipeline.track import _learn, _no_initialisation, _settings, _skipped_row
+from wristtrack.pipeline.track import (
+    learn_colours,
+    no_initialisation_message,
+    settings_dict,
+    skipped_row,
+)
 from wristtrack.tracking import compiled
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
@@ -213,7 +218,7 @@ class BackgroundLearning(threading.Thread):
 
     def run(self) -> None:
         try:
-            _learn(self._learning, *self._args)
+            learn_colours(self._learning, *self._args)
         except Exception:  # any failure: half-learned models must not be handed over
             self._learning = None  # a refinement that cannot be made must not stop a session
 
@@ -276,7 +281,7 @@ def track_live(
                     break
                 item, dropped = slot.take(STOP_POLL_S)
                 for index, timestamp in dropped:
-                    writer.write(_skipped_row(index, timestamp, 0, DROPPED))
+                    writer.write(skipped_row(index, timestamp, 0, DROPPED))
                     log.dropped.append(index)
                 if item is None:
                     if slot.ended:
@@ -285,7 +290,7 @@ def track_live(
                 started = time.perf_counter()
                 frame = item.frame
                 if not frame.ok:
-                    writer.write(_skipped_row(frame.index, frame.timestamp, 0, "bad_frame"))
+                    writer.write(skipped_row(frame.index, frame.timestamp, 0, "bad_frame"))
                     log.bad.append(frame.index)
                     skipped.append({"frame": frame.index, "error": frame.error})
                     continue
@@ -293,7 +298,7 @@ def track_live(
                 try:
                     result = tracker.step(det)
                 except InputError as exc:  # e.g. a timestamp going backwards: skip the frame
-                    writer.write(_skipped_row(frame.index, frame.timestamp, det.count, "skipped"))
+                    writer.write(skipped_row(frame.index, frame.timestamp, det.count, "skipped"))
                     log.bad.append(frame.index)
                     skipped.append({"frame": frame.index, "error": str(exc)})
                     continue
@@ -331,7 +336,7 @@ def track_live(
         camera_pose_w0=camera_pose_dict(tracker.R_c0, tracker.t_c0),
         camera=camera.to_dict(),
         source=str(source.source),
-        settings={**_settings(config), "smoothed": False, "live": True},
+        settings={**settings_dict(config), "smoothed": False, "live": True},
         skipped_frames=skipped,
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
@@ -341,7 +346,7 @@ def track_live(
     if view is not None:
         view.finish(log.stats(), live["ended_by"])
     if tracker.R_c0 is None:
-        raise InitialisationError(_no_initialisation(source, summary.frames, tracker))
+        raise InitialisationError(no_initialisation_message(source, summary.frames, tracker))
     return data, live
 
 
