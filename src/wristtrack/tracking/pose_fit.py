@@ -79,16 +79,8 @@ def refine_pose(
     ``camera.project`` (with distortion); the Jacobian is that of the undistorted pinhole, which
     only slows convergence slightly for mild distortion.
     """
-    P = np.asarray(layout.points, dtype=float)
+    P, uv, depth, vis, dvis = _observed(layout, uv, depth, visible)
     n = P.shape[0]
-    uv = np.asarray(uv, dtype=float).reshape(n, 2)
-    vis = np.isfinite(uv).all(axis=1)
-    if visible is not None:
-        vis &= np.asarray(visible, dtype=bool).reshape(n)
-    dvis = np.zeros(n, dtype=bool)
-    if depth is not None:
-        depth = np.asarray(depth, dtype=float).reshape(n)
-        dvis = vis & np.isfinite(depth) & (depth > 0)
     n_res = 2 * int(vis.sum()) + int(dvis.sum())
     if vis.sum() < 3 or n_res < 7:
         raise InitialisationError(
@@ -191,6 +183,24 @@ def facing_cos(R: np.ndarray, t: np.ndarray, layout: HandLayout) -> float:
     return float(-R[:, 2] @ c / np.linalg.norm(c))
 
 
+def _observed(
+    layout: HandLayout, uv: np.ndarray, depth: np.ndarray | None, visible: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    """Layout points, pixels and depths as arrays in layout order, the markers seen (finite
+    pixels, and ``visible`` where given) and those of them with a valid depth."""
+    P = np.asarray(layout.points, dtype=float)
+    n = P.shape[0]
+    uv = np.asarray(uv, dtype=float).reshape(n, 2)
+    vis = np.isfinite(uv).all(axis=1)
+    if visible is not None:
+        vis &= np.asarray(visible, dtype=bool).reshape(n)
+    dvis = np.zeros(n, dtype=bool)
+    if depth is not None:
+        depth = np.asarray(depth, dtype=float).reshape(n)
+        dvis = vis & np.isfinite(depth) & (depth > 0)
+    return P, uv, depth, vis, dvis
+
+
 def initial_guesses(
     uv: np.ndarray,
     depth: np.ndarray | None,
@@ -199,17 +209,9 @@ def initial_guesses(
     visible: np.ndarray | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Candidate starting poses, best first (see ``initial_guess``)."""
-    P = np.asarray(layout.points, dtype=float)
-    n = P.shape[0]
-    uv = np.asarray(uv, dtype=float).reshape(n, 2)
-    vis = np.isfinite(uv).all(axis=1)
-    if visible is not None:
-        vis &= np.asarray(visible, dtype=bool).reshape(n)
-    if depth is not None:
-        depth = np.asarray(depth, dtype=float).reshape(n)
-        ok = vis & np.isfinite(depth) & (depth > 0)
-        if ok.sum() >= 3:
-            return [_kabsch(P[ok], camera.backproject(uv[ok], depth[ok]))]
+    P, uv, depth, vis, ok = _observed(layout, uv, depth, visible)
+    if ok.sum() >= 3:
+        return [_kabsch(P[ok], camera.backproject(uv[ok], depth[ok]))]
     if vis.sum() < 4:
         raise InitialisationError(
             f"only {int(vis.sum())} markers visible and too few depth readings to start the pose "
