@@ -18,6 +18,7 @@ from wristtrack.io.folder import FolderRecording
 from wristtrack.io.live.opencv import LiveRecording
 from wristtrack.io.live.replay import ReplayRecording
 from wristtrack.io.live.sources import open_live
+from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
 
 
@@ -245,6 +246,40 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
         np.testing.assert_allclose(live[col][tracked], off[col][k[tracked]], atol=1e-3)
     for col in ("deviation_deg", "flexion_deg", "pronation_deg"):
         np.testing.assert_allclose(live[col][tracked], off[col][k[tracked]], atol=0.5)
+
+
+def test_track_reads_a_realsense_recording_offline_frame_by_frame(reach, realsense_file,
+                                                                   tmp_path):
+    """Given as a file (not --live), an SDK recording is read in full, as fast as the tracker
+    takes it: the same poses as the recording folder it was made from, frame by frame."""
+    with open_recording(realsense_file) as rec:
+        assert rec.file == realsense_file
+        tail = list(rec.frames(5))  # a resumed run starts part-way through
+    assert [f.index for f in tail] == list(range(5, 12))
+    want = [f for _, f in zip(range(12), FolderRecording(reach).frames(), strict=False)][5:]
+    for got, frame in zip(tail, want, strict=True):
+        np.testing.assert_array_equal(got.bgr, frame.bgr)
+    assert main(["track", str(realsense_file), "--out", str(tmp_path / "bag"), "--no-report",
+                 "--no-progress"]) == 0
+    first = tmp_path / "first12"  # the folder cut to the frames that were recorded (and, as
+    first.mkdir()                # in the SDK file, without hand.json)
+    for name in ("camera.json", "rgb", "depth"):
+        (first / name).symlink_to(reach / name)
+    lines = (reach / "frames.csv").read_text().splitlines()[:13]
+    (first / "frames.csv").write_text("\n".join(lines) + "\n")
+    assert main(["track", str(first), "--out", str(tmp_path / "off"), "--no-report",
+                 "--no-progress"]) == 0
+    bag = read_poses(tmp_path / "bag" / "poses.csv")
+    off = read_poses(tmp_path / "off" / "poses.csv")
+    assert len(bag["frame"]) == len(off["frame"]) == 12
+    np.testing.assert_array_equal(bag["status"], off["status"])
+    # Timestamps pass through the SDK as float milliseconds (~1e-7 s), the intrinsics and
+    # depth scale as float32 (relative 6e-8); nothing else differs.
+    np.testing.assert_allclose(bag["timestamp"], off["timestamp"], atol=1e-6)
+    for col in ("tx", "ty", "tz"):
+        np.testing.assert_allclose(bag[col], off[col], atol=1e-6)
+    for col in ("deviation_deg", "flexion_deg", "pronation_deg"):
+        np.testing.assert_allclose(bag[col], off[col], atol=1e-4)
 
 
 def test_realsense_without_a_device_or_library_is_one_line(monkeypatch, tmp_path):

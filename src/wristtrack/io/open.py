@@ -14,7 +14,7 @@ from wristtrack.hand import HandLayout
 from wristtrack.io.base import Recording, reject_options
 from wristtrack.io.folder import FolderRecording
 from wristtrack.io.live.opencv import LiveRecording
-from wristtrack.io.rosbag import BagRecording
+from wristtrack.io.rosbag import BagRecording, written_by_realsense_sdk
 from wristtrack.io.video import VIDEO_SUFFIXES, VideoRecording
 
 LIVE_PREFIX = "live:"
@@ -32,6 +32,7 @@ def open_recording(
     - a video file (.mp4 .avi .mov .mkv ...): RGB only, ``camera`` required;
     - a ROS 1 ``.bag`` file or a ROS 2 bag folder (metadata.yaml): options ``color_topic``,
       ``depth_topic``, ``info_topic``, ``sync_tolerance`` (seconds);
+    - a RealSense Viewer/SDK recording (``.bag`` in the SDK's layout, or a lone ``.db3``);
     - ``"live:0"`` (or ``live=0``): an OpenCV camera, ``camera`` required; option ``max_frames``.
     """
     live = options.pop("live", None)
@@ -59,6 +60,13 @@ def open_recording(
             "bag); give the folder that contains one of them"
         )
     suffix = path.suffix.lower()
+    if (suffix == ".bag" and written_by_realsense_sdk(path)) or \
+            (suffix == ".db3" and not (path.parent / "metadata.yaml").is_file()):
+        # RealSense Viewer/SDK recordings: read by the SDK as it plays them back, every frame
+        # (not at the recorded pace), depth aligned to colour by the SDK.
+        from wristtrack.io.live.realsense import RealSenseRecording
+
+        return RealSenseRecording(None, camera, hand, file=path, real_time=False, **options)
     if suffix == ".bag":
         return BagRecording(path, camera, hand, **options)
     if suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():

@@ -70,6 +70,20 @@ def _rosbags() -> Any:
     return highlevel, typesys
 
 
+def written_by_realsense_sdk(path: Path) -> bool:
+    """Whether a ROS 1 .bag is a RealSense Viewer/SDK recording (its /device_N/... layout,
+    which the SDK reads back far better than a topic reader: streams, options, extrinsics)."""
+    try:
+        from rosbags.rosbag1 import Reader
+    except ImportError:
+        return False  # BagRecording then says how to install rosbags
+    try:
+        with Reader(path) as reader:
+            return any(t.startswith("/device_0/") for t in reader.topics)
+    except Exception:  # a damaged or foreign file: BagRecording gives the error line
+        return False
+
+
 # ------------------------------------------------------------------------------ topic choice
 
 

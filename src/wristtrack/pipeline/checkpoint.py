@@ -95,7 +95,7 @@ def input_identity(recording) -> dict[str, Any] | None:
     """
     identity: dict[str, Any] = {"kind": recording.kind}
     frames_csv = getattr(recording, "frames_csv", None)
-    source = Path(str(recording.source))
+    source = Path(str(getattr(recording, "file", None) or recording.source))
     if frames_csv is not None:
         identity["frames_csv_sha256"] = _sha256(Path(frames_csv).read_bytes())
     elif recording.kind == "live camera":

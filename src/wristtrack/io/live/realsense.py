@@ -11,6 +11,7 @@ through the same pipeline, as the SDK plays them back: ``.bag`` (RealSense Viewe
 from __future__ import annotations
 
 from collections.abc import Iterator
+from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
@@ -161,7 +162,7 @@ class RealSenseRecording(Recording):
         raise TypeError(f"{self.source}: a RealSense stream has no length")
 
     def _frames(self, start: int = 0) -> Iterator[Frame]:
-        if start:
+        if start and self.file is None:
             raise InputError(f"{self.source}: a RealSense stream cannot start at frame {start}")
         index, t0 = 0, None
         last_number = None
@@ -171,8 +172,13 @@ class RealSenseRecording(Recording):
             raise InputError(f"{self.source} cannot be started: {exc}") from None
         self._running = True
         if self.file is not None:
+            # Playback starts with the pipeline, and a frameset delivered before the pace is
+            # set can be lost (one run in three lost frame 0): pause, set the pace, rewind.
             self._playback = profile.get_device().as_playback()
+            self._playback.pause()
             self._playback.set_real_time(self._real_time)
+            self._playback.seek(timedelta(0))
+            self._playback.resume()
         quiet = 0.0
         while self._running and (self.max_frames is None or index < self.max_frames):
             ok, frames = self._pipe.try_wait_for_frames(int(POLL_S * 1000))
@@ -194,8 +200,11 @@ class RealSenseRecording(Recording):
             if not color:
                 continue  # a depth-only frameset (streams start at different moments)
             number = color.get_frame_number()
-            if number == last_number:
-                continue  # a playback may hand the same colour frame to two framesets
+            if number == last_number or (self._playback is not None and last_number is not None
+                                         and number < last_number):
+                # A playback may hand a colour frame to two framesets, or again after the
+                # rewind; a device's counter may restart (a USB reset), so only files go by order.
+                continue
             last_number = number
             t = color.get_timestamp() / 1000.0  # ms -> s
             t0 = t if t0 is None else t0
@@ -204,7 +213,8 @@ class RealSenseRecording(Recording):
             raw = np.array(np.asanyarray(depth.get_data()), np.uint16, copy=True) if depth else None
             where = f"{self.source} frame {index}"
             self.check_size(bgr, where)
-            yield Frame(index, t - t0, bgr, raw)
+            if index >= start:  # a resumed recording is read from its start, as it was played
+                yield Frame(index, t - t0, bgr, raw)
             index += 1
 
     def _to_bgr(self, color: Any) -> np.ndarray:
