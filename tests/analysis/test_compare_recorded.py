@@ -83,8 +83,26 @@ def test_round_trip_recovers_offset_transform_and_the_evaluate_errors(trips, tmp
     ang, mm = _transform_errors(r, planted)
     assert ang <= 0.1 and mm <= 0.5
     assert r["pos_rmse_mm"] == pytest.approx(ev["position_rmse_mm"], rel=0.05)
-    assert r["rot_rmse_deg"] == pytest.approx(ev["orientation_rmse_deg"], rel=0.05)
+    # The registration is fitted to the same trajectories, so it absorbs the constant part of
+    # our orientation error (a rotation of the camera frame), which no validation against a
+    # reference in another frame can see: compare recovers evaluate's figure net of it.
+    assert r["rot_rmse_deg"] == pytest.approx(_rmse_net_of_constant_rotation(run, rec),
+                                              rel=0.05)
+    assert r["rot_rmse_deg"] <= ev["orientation_rmse_deg"] * 1.05
     assert r["frames_compared"] == ev["frames_compared"]
+
+
+def _rmse_net_of_constant_rotation(run, rec) -> float:
+    """evaluate's orientation RMSE (deg) after removing the mean camera-frame rotation error."""
+    from scipy.spatial.transform import Rotation
+
+    est, truth = read_poses(run / "poses.csv"), read_poses(rec / "truth.csv")
+    R_est, _ = rows_to_poses(est)
+    R_true, _ = rows_to_poses(truth)
+    ok = np.isfinite(R_est).all(axis=(1, 2))
+    err = Rotation.from_matrix(R_est[ok] @ np.swapaxes(R_true[: len(R_est)][ok], 1, 2))
+    net = err.mean().inv() * err  # the mean rotation taken out, as the registration does
+    return float(np.degrees(np.sqrt(np.mean(net.magnitude() ** 2))))
 
 
 def test_round_trip_through_the_glove_cluster_is_within_its_stated_uncertainty(trips, tmp_path):
@@ -101,7 +119,11 @@ def test_round_trip_through_the_glove_cluster_is_within_its_stated_uncertainty(t
     shape = np.array(planted["cluster_in_hand_frame_m"])
     # The cluster frame's origin is its first marker: our wrist lies |GloveR1| from it.
     assert np.linalg.norm(x_t) == pytest.approx(np.linalg.norm(shape[0]), abs=0.002)
-    assert r["pos_rmse_mm"] == pytest.approx(ev["position_rmse_mm"], rel=0.1)
+    # The registration's translation and the cluster offset absorb a constant position error
+    # in the camera frame and one in the hand frame: evaluate's figure net of both.
+    assert r["pos_rmse_mm"] == pytest.approx(_pos_rmse_net_of_constant_offsets(run, rec),
+                                             rel=0.1)
+    assert r["pos_rmse_mm"] <= ev["position_rmse_mm"] * 1.1
 
 
 def test_the_written_reference_is_the_motion_seen_from_the_lab(trips):
@@ -167,3 +189,18 @@ def test_a_long_gap_in_the_chosen_segment_is_refused(tmp_path, capsys):
             "--cluster", "A,B,C", "--motion-start", "0.5", "--motion-duration", "1.5"]
     assert main(argv) == 2
     assert "0.31 s gap at 0.99 s" in capsys.readouterr().err
+
+
+def _pos_rmse_net_of_constant_offsets(run, rec) -> float:
+    """evaluate's position RMSE (mm) after a least-squares removal of a constant error in the
+    camera frame and one in the hand frame (e_k = c + R_k d)."""
+    est, truth = read_poses(run / "poses.csv"), read_poses(rec / "truth.csv")
+    _, t_est = rows_to_poses(est)
+    R_true, t_true = rows_to_poses(truth)
+    ok = np.isfinite(t_est).all(axis=1)
+    e = (t_est[ok] - t_true[: len(t_est)][ok]).reshape(-1)
+    A = np.concatenate([np.tile(np.eye(3), (int(ok.sum()), 1)),
+                        R_true[: len(t_est)][ok].reshape(-1, 3)], axis=1)
+    cd, *_ = np.linalg.lstsq(A, e, rcond=None)
+    net = (e - A @ cd).reshape(-1, 3)
+    return float(np.sqrt(np.mean(np.sum(net**2, axis=1))) * 1e3)

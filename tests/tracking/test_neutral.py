@@ -10,7 +10,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from wristtrack.camera import Camera
-from wristtrack.depth_noise import depth_sigma
 from wristtrack.hand import HandLayout, estimate_layout, fit_pose
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import Trajectory
@@ -60,7 +59,7 @@ def test_still_start_w0_and_layout_beat_one_frame():
         R0, t0 = initial_guess(uv, z, cam, layout)
         noise = MeasurementNoise()  # weighted as the still start weighs them
         fit = refine_pose(uv, z, cam, layout, R0, t0, noise.pixel_sigma,
-                          depth_sigma(z, noise.depth_coeff, noise.depth_floor))
+                          noise.depth_sigma(z))
         one_rot.append(angle_deg(fit.R_ch, R))
         R_w, t_w, cov = still.w0(layout, R0, t0)
         many_rot.append(angle_deg(R_w, R))

@@ -32,6 +32,8 @@ from wristtrack.tracking.kernel import (
     _CY,
     _DEPTH_COEFF,
     _DEPTH_FLOOR,
+    _DEPTH_OFFSET,
+    _DEPTH_Z0,
     _FACING_COS,
     _FX,
     _FY,
@@ -74,6 +76,7 @@ def frame_constants(
     par[_U_MAX], par[_V_MAX] = camera.width - 0.5, camera.height - 0.5
     par[_PIXEL_VAR] = noise.pixel_sigma**2
     par[_DEPTH_COEFF], par[_DEPTH_FLOOR] = noise.depth_coeff, noise.depth_floor
+    par[_DEPTH_OFFSET], par[_DEPTH_Z0] = noise.depth_offset, noise.depth_z0
     par[_SQRT_QA] = math.sqrt(process.linear_accel)
     par[_SQRT_QW] = math.sqrt(process.angular_accel)
     par[_FACING_COS] = facing_cos

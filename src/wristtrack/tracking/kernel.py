@@ -37,8 +37,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
 # Layout of the ``par`` vector of constants (built by ``compiled.frame_constants``).
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
-    _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE, _N_PAR,
-) = range(16)  # fmt: skip
+    _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE, _N_PAR,
+) = range(18)  # fmt: skip
 
 
 # ------------------------------------------------------------------------ small helpers
@@ -287,7 +287,8 @@ def _add_noise(C, mean, J, par):
     for i in range(2 * J):
         C[i, i] += par[_PIXEL_VAR]
     for j in range(J):
-        sd = depth_sigma(mean[2 * J + j], par[_DEPTH_COEFF], par[_DEPTH_FLOOR])
+        sd = depth_sigma(mean[2 * J + j], par[_DEPTH_COEFF], par[_DEPTH_FLOOR],
+                         par[_DEPTH_OFFSET], par[_DEPTH_Z0])
         C[2 * J + j, 2 * J + j] += sd * sd
 
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 import numpy as np
 
 from wristtrack.camera import Camera
-from wristtrack.depth_noise import depth_sigma
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import ConfigError, InitialisationError, InputError
 from wristtrack.geometry import skew
@@ -98,7 +97,7 @@ class StillStart:
         stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times
         noise = noise or MeasurementNoise()
         depth = np.concatenate(self.depth)
-        sz = depth_sigma(np.nan_to_num(depth, nan=1.0), noise.depth_coeff, noise.depth_floor)
+        sz = noise.depth_sigma(np.nan_to_num(depth, nan=1.0))
         try:
             fit = refine_pose(np.concatenate(self.uv), depth, self.camera, stacked, R0, t0,
                               noise.pixel_sigma, sz)

@@ -15,19 +15,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from wristtrack.camera import Camera
-from wristtrack.depth_noise import KINECT_DEPTH_COEFF, depth_sigma
+from wristtrack.depth_noise import NGUYEN_OFFSET, NGUYEN_QUADRATIC, NGUYEN_Z0, depth_sigma
 
 
 @dataclass(frozen=True)
 class MeasurementNoise:
+    """The sensor's noise as the filter models it.
+
+    Depth: sigma_z = max(offset + coeff (z - z0)^2, floor) (``depth_noise.depth_sigma``), by
+    default Nguyen, Izadi and Lovell's measurement of a Kinect v1 / Xtion (1.3 mm at 0.65 m).
+    A blob's depth is a trimmed mean of its pixels, but structured-light noise is correlated over
+    the ~9x9 px matching window, as large as a marker's image: the mean removes little of it,
+    so the blob's sigma is the pixel's. (Khoshelham and Elberink's 1.425e-3 z^2, half of it at
+    arm's length, had the filter trust depth twice too much: the out-of-plane angles took the
+    depth noise, 2.2x the error of the same recording without structured-light noise.)
+    """
+
     pixel_sigma: float = 0.7  # px, blob centre noise
-    depth_coeff: float = KINECT_DEPTH_COEFF  # depth noise sigma = coeff * z^2 (depth_noise)
-    # m, lower bound on a blob's depth sigma. Nguyen et al.'s 1.2 mm offset (structured-light
-    # noise is correlated over the matching window, so a blob's pixels do not average it away)
-    # helped every rendered scenario at 30 fps (deviation 0.48 -> 0.43 deg) but lost the
-    # 10 fps flexion of tests/pipeline/test_batch.py (25 deg per frame: the weaker depth let
-    # the filter slide into the planar flip). Kept at 0.5 mm until the noise is per blob.
-    depth_floor: float = 0.5e-3
+    depth_coeff: float = NGUYEN_QUADRATIC  # 1/m
+    depth_floor: float = 0.0  # m
+    depth_offset: float = NGUYEN_OFFSET  # m
+    depth_z0: float = NGUYEN_Z0  # m
+
+    def depth_sigma(self, z: float | np.ndarray) -> float | np.ndarray:
+        """The depth sigma (m) of a marker at depth ``z`` (m)."""
+        return depth_sigma(z, self.depth_coeff, self.depth_floor, self.depth_offset,
+                           self.depth_z0)
 
 
 class MarkerObservation:
@@ -72,5 +85,5 @@ class MarkerObservation:
         var = np.full((self.n_markers, self.k), self.noise.pixel_sigma**2)
         if self.k == 3:
             z = y_pred.reshape(self.n_markers, 3)[:, 2]
-            var[:, 2] = depth_sigma(z, self.noise.depth_coeff, self.noise.depth_floor) ** 2
+            var[:, 2] = self.noise.depth_sigma(z) ** 2
         return var.reshape(-1)
