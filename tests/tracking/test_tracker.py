@@ -8,6 +8,7 @@ from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InputError
 from wristtrack.filter import ukf
+from wristtrack.geometry import rotation_distance
 from wristtrack.hand import HandLayout
 from wristtrack.sim.detections import NoiseModel, acceptance_noise, simulate_detections
 from wristtrack.sim.motion import SCENARIOS, neutral_camera_pose, scenario
@@ -203,3 +204,36 @@ def test_frame_result_empty_is_a_result_without_an_estimate():
     assert r.labels.tolist() == [-1, -1, -1] and r.n_clutter == 3 and r.n_visible == 0
     labelled = FrameResult.empty(5, 0.6, Status.INITIALISING, np.array([0, -1]), side="left")
     assert labelled.n_clutter == 1 and labelled.side == "left"
+
+
+@pytest.mark.parametrize("reacquire", [True, False])
+def test_a_prediction_that_left_the_markers_is_fitted_afresh_at_once(reacquire):
+    """One frame period later the hand is where it would be 1 s later (frames skipped by a
+    camera that kept its clock: a jump no motion model predicts). No blob lies in the gates
+    although all six markers are in view: the tracker fits the layout to that frame at once
+    instead of coasting on the stale prediction (the paper's way, ``reacquire=False``)."""
+    rng = np.random.default_rng(11)
+    truth, camera, layout = scenario("flexion", rng=rng)
+    frames = simulate_detections(truth, camera, layout, NoiseModel(p_miss=0.0, clutter_mean=2.0),
+                                  rng)
+    tracker = Tracker(camera, layout, TrackerConfig(reacquire=reacquire))
+    jump, skip = 60, 30
+    for f in frames[:jump]:
+        tracker.step(f.detections)
+    period = truth.t[1] - truth.t[0]
+    results = []
+    for k in range(jump + skip, jump + skip + 5):
+        det = frames[k].detections
+        det = Detections(det.timestamp - skip * period, det.uv, det.depth)
+        results.append((k, tracker.step(det)))
+    k, after = results[0]
+    assert (frames[k].labels >= 0).sum() == 6  # all six in view (among clutter)
+    assert np.degrees(rotation_distance(truth.R_ch[jump - 1], truth.R_ch[k])) > 30
+    if reacquire:
+        for k, res in results:
+            assert res.status == Status.TRACKING and res.n_visible == 6
+            assert np.degrees(rotation_distance(res.R_ch, truth.R_ch[k])) < 2.0
+    else:
+        # too few markers in the gates: it drifts on the prediction, towards `lost_after`
+        assert after.n_visible < TrackerConfig().min_markers
+        assert np.degrees(rotation_distance(after.R_ch, truth.R_ch[k])) > 20

@@ -66,6 +66,9 @@ class TrackerConfig:
     # alpha rad/s^2) in turn: an unmodelled acceleration (a fast reach peaks at ~15 m/s^2).
     # A retry is kept only if its update is consistent. () = off (the paper's method).
     manoeuvre_accel: tuple[tuple[float, float], ...] = ((15.0, 15.0), (45.0, 45.0))
+    # A frame still short of min_markers markers (after the retry) among enough blobs is
+    # fitted afresh, as an initialisation would (Tracker._reacquire). False: the paper's way.
+    reacquire: bool = True
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -84,6 +87,7 @@ class TrackerConfig:
         """
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
+        kw.setdefault("reacquire", False)
         kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles
         return cls(association="paper", use_depth=False, **kw)
 
@@ -177,6 +181,45 @@ class Tracker:
             self.layout = init.layout
             if type(self.model) is ConstantRateModel:
                 self._still = StillStart(self.camera)
+        return self._start_track(det, init)
+
+    def _reacquire(self, det: Detections) -> FrameResult | None:
+        """A new track fitted to this frame, or None where the layout does not fit it.
+
+        For a frame whose association found fewer than ``min_markers`` markers among at least
+        that many blobs, or whose update is inconsistent (NIS beyond its quantile) even after
+        the manoeuvre retry: the prediction has left the markers (a manoeuvre beyond the
+        retry's, a stalled camera, a frame rate too low for the motion). Coasting on it for
+        ``lost_after`` frames would drift further while the markers are in plain view, and one
+        unscented update from that far off lands short of them (a 45 deg jump left 20 deg).
+        W0 and the layout are kept.
+        """
+        try:
+            init = initialise(det, self.camera, self.layout)
+        except InitialisationError:
+            return None
+        # A fit that leaves the blobs off the markers is no better than the prediction (a hand
+        # that no longer matches the layout): the innovation check is left to judge it.
+        x = self.model.initial_state(self.R_c0.T @ init.R_ch,
+                                     self.R_c0.T @ (init.t_ch - self.t_c0))
+        if not self._explains(x, init.labels, det):
+            return None
+        return self._start_track(det, init)
+
+    def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
+        """Whether the markers at state ``x`` lie on their blobs: the squared pixel residuals
+        within the chi-square quantile. A retried update passes its NIS test with the prior
+        widened for a manoeuvre, but one unscented step from far off may stop short of the
+        blobs it was given."""
+        blobs = np.flatnonzero(labels >= 0)
+        if blobs.size == 0:
+            return False
+        uv = self._observation(False)(x[None])[0].reshape(-1, 2)
+        r = (det.uv[blobs] - uv[labels[blobs]]) / self.config.measurement.pixel_sigma
+        return float(np.sum(r * r)) <= _nis_limit(self.config.nis_quantile, 2 * blobs.size)
+
+    def _start_track(self, det: Detections, init) -> FrameResult:
+        """A new track (and track_id) from an initialisation, its pose expressed in W0."""
         R = self.R_c0.T @ init.R_ch
         p = self.R_c0.T @ (init.t_ch - self.t_c0)
         # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
@@ -219,13 +262,20 @@ class Tracker:
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg = self.config
         dt = det.timestamp - track.timestamp
-        out = self._filter_frame(det, track, dt)
+        out = plain = self._filter_frame(det, track, dt)
         if det.count >= cfg.min_markers and hasattr(self.model, "angular_velocity"):
-            out = self._manoeuvre_retry(det, track, dt, out)
+            out = self._manoeuvre_retry(det, track, dt, plain)
         x, P, labels, n_assoc, nis, dof = out
         if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
             self._lose()
             return self._empty(det, Status.LOST)
+        lost_them = (n_assoc < cfg.min_markers
+                     or bool(dof and nis > _nis_limit(cfg.nis_quantile, dof))
+                     or (out is not plain and not self._explains(x, labels, det)))
+        if lost_them and cfg.reacquire and det.count >= cfg.min_markers:
+            again = self._reacquire(det)
+            if again is not None:
+                return again
         track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
         if track.weak_frames > cfg.lost_after:
             self._lose()
