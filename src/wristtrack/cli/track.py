@@ -7,6 +7,7 @@ import sys
 
 from wristtrack.cli.options import add_tracker_options, positive_int, tracker_config
 from wristtrack.cli.runs import export_one
+from wristtrack.detect.config import PRESETS, detector_config
 from wristtrack.errors import WristtrackError
 
 
@@ -19,6 +20,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _track(args: argparse.Namespace) -> int:
+    detector_config(args.detector)  # an unknown name: one line listing the choices
     if args.live is not None:
         return _track_live(args)
     from wristtrack.camera import Camera
@@ -58,7 +60,7 @@ def _track(args: argparse.Namespace) -> int:
             summary = track_recording(
                 recording, args.out, tracker_config(args), progress=not args.no_progress,
                 smooth=args.smooth, overlay=overlay, resume=args.resume,
-                checkpoint_every=args.checkpoint_every, labels=labels,
+                checkpoint_every=args.checkpoint_every, labels=labels, detector=args.detector,
             )
     except RunComplete as done:
         print(f"wristtrack track: {done}")
@@ -93,7 +95,8 @@ def _track_live(args: argparse.Namespace) -> int:
     if args.input:
         raise WristtrackError(f"give a recording ({args.input}) or --live SOURCE, not both")
     refused = [flag for flag, on in (("--resume", args.resume), ("--smooth", args.smooth),
-                                     ("--labels", args.labels)) if on]
+                                     ("--labels", args.labels),
+                                     ("--detector paper", args.detector != "default")) if on]
     if refused:
         raise WristtrackError(
             f"{', '.join(refused)} cannot be used with --live (live tracking is causal and runs "
@@ -227,6 +230,11 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     track.add_argument("--record", metavar="DIR",
                        help="with --live: also write the raw frames as a recording folder")
     add_tracker_options(track)
+    track.add_argument(
+        "--detector", default="default", metavar="{" + ",".join(PRESETS) + "}",
+        help="marker detector: default (ours) or paper (the paper's section III-A as "
+        "published, without our refinements: for comparison)",
+    )
     track.add_argument(
         "--smooth", action="store_true",
         help="offline unscented RTS smoothing of the whole run (filtered poses kept in "

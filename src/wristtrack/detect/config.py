@@ -4,11 +4,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from wristtrack.errors import ConfigError
+
 
 @dataclass(frozen=True)
 class DetectorConfig:
     """Thresholds of the marker detector. Colours are OpenCV 8-bit: HSV hue 0..179 (degrees / 2),
-    saturation and value 0..255; YCrCb 0..255 each. Pixel sizes are full resolution."""
+    saturation and value 0..255; YCrCb 0..255 each. Pixel sizes are full resolution.
+
+    ``preset`` "paper" (:meth:`paper`) is the paper's detection as published, without our
+    refinements (:mod:`wristtrack.detect.paper`)."""
+
+    preset: str = "default"  # one of PRESETS
+    learn_colours: bool = True  # learn_markers / adapt refine the marker and skin colours
 
     # --- skin region of interest (YCrCb, computed on a 1/skin_downsample image)
     skin_downsample: int = 4  # even
@@ -68,3 +76,24 @@ class DetectorConfig:
 
     # --- learn_markers
     learn_radius_px: int = 18  # half-size of the patch examined around each labelled marker
+
+    @classmethod
+    def paper(cls) -> DetectorConfig:
+        """The paper's section III-A as published: a fixed skin-colour region of interest (no
+        adaptation to the subject, no tracked window, no per-blob skin gate), marker pixels by
+        back-projection of the fixed reference histogram (no learned colour), connected
+        components at full resolution, each kept when its Bhattacharyya coefficient with the
+        reference is high enough; its centre the centroid of its pixels (see
+        :mod:`wristtrack.detect.paper` for what is left out)."""
+        return cls(preset="paper", learn_colours=False, skin_adapt_frames=0, track_roi=False,
+                   require_skin=False)
+
+
+PRESETS = {"default": DetectorConfig, "paper": DetectorConfig.paper}
+
+
+def detector_config(name: str) -> DetectorConfig:
+    """The detector configuration of preset ``name`` (one of :data:`PRESETS`)."""
+    if name not in PRESETS:
+        raise ConfigError(f"unknown detector {name!r}: choose from {', '.join(PRESETS)}")
+    return PRESETS[name]()

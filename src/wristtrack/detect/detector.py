@@ -22,8 +22,10 @@ The paper's detection (Cordella et al., section III-A), done as finely as the se
    down-weight, but not to be taken at face value.
 
 ``learn_markers`` refines the reference histogram and the skin model from the labelled
-markers of one frame. Cost: 1.5-2 ms per 640x480 frame on one core of a small shared VM,
-mostly fixed per-call overhead (see :func:`wristtrack.sim.marker_scene.time_detection`).
+markers of one frame. ``DetectorConfig.paper()`` (preset "paper") is the paper's detection as
+published, without steps 3-4 and the adaptations (:mod:`wristtrack.detect.paper`).
+Cost: 1.5-2 ms per 640x480 frame on one core of a small shared VM, mostly fixed per-call
+overhead (see :func:`wristtrack.sim.marker_scene.time_detection`).
 """
 
 from __future__ import annotations
@@ -47,10 +49,11 @@ from wristtrack.detect.blobs import (
     upsample2,
 )
 from wristtrack.detect.colour import back_project, gaussian_reference
-from wristtrack.detect.config import DetectorConfig
+from wristtrack.detect.config import PRESETS, DetectorConfig
 from wristtrack.detect.detections import Detections
 from wristtrack.detect.learning import MarkerLearning
 from wristtrack.detect.marker_colour import MarkerColour
+from wristtrack.detect.paper import paper_blobs
 from wristtrack.detect.skin import SkinModel, SkinRegion
 from wristtrack.detect.streaks import MAX_STREAK_RATIO, find_streaks
 from wristtrack.errors import ConfigError, InputError
@@ -104,6 +107,9 @@ class MarkerDetector(MarkerLearning):
             raise ConfigError(
                 f"detector skin_downsample={config.skin_downsample}: must be an even number >= 2"
             )
+        if config.preset not in PRESETS:
+            raise ConfigError(f"detector preset {config.preset!r}: choose from "
+                              f"{', '.join(PRESETS)}")
         self.colour = MarkerColour(gaussian_reference(
             config.hist_bins,
             config.marker_hue,
@@ -205,8 +211,30 @@ class MarkerDetector(MarkerLearning):
 
     def _search(self, bgr, half_roi, depth, region: SkinRegion, wide: bool = False) -> list[Blob]:
         """The blobs of one region (``half_roi``: its box at half resolution)."""
+        if self.config.preset == "paper":
+            return self._paper_search(bgr, depth, region)
         stack = self._candidates(bgr, half_roi, depth, region, wide)
         return [] if stack is None else self._classify(stack)
+
+    def _paper_search(self, bgr, depth, region: SkinRegion) -> list[Blob]:
+        """The paper's blobs of one region (detect/paper.py), none of them suspect."""
+        found = paper_blobs(bgr, depth, region.box, self.colour, self.config)
+        if found is None:
+            return []
+        uv, sh = found.uv, found.shape
+        if self.config.require_skin and region.found:
+            keep = region.on_skin(uv)
+            uv = uv[keep]
+        else:
+            keep = np.ones(len(uv), bool)
+        z = (np.full(len(keep), np.nan) if found.depth is None
+             else found.depth * self.camera.depth_scale)
+        return [Blob(uv=(float(uv_[0]), float(uv_[1])), area=float(found.area[k]),
+                     depth=float(z[k]), similarity=float(found.similarity[k]),
+                     major=float(sh.major[k]), minor=float(sh.minor[k]),
+                     angle=float(sh.angle[k]), skew=float(sh.skew[k]),
+                     expected_diameter=math.nan)
+                for uv_, k in zip(uv, np.flatnonzero(keep).tolist(), strict=True)]
 
     def _streaks(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
         """Motion-blurred markers in the tracking window ``box`` that the colour search missed

@@ -31,7 +31,12 @@ class MarkerLearning:
         excluded) gives the subject's skin chroma. Markers that do not stand out are skipped;
         if none does, the models stay as they were (:attr:`learned_count` says how many were
         used): a refinement that cannot be made must not stop a recording.
+        Nothing is learned when the config's ``learn_colours`` is off (the paper preset).
         """
+        if not self.config.learn_colours:  # the paper preset: its reference stays fixed
+            self._check(bgr, None)
+            self.learned_count = 0
+            return
         masks = self._labelled_masks(bgr, uv, "learn_markers")
         self.learned_count = 0 if masks is None else masks[2]
         if masks is None:
@@ -52,6 +57,8 @@ class MarkerLearning:
         :meth:`wristtrack.detect.skin.SkinModel.adapt`); the default marker colour stays in use
         beside the learned one. Needs at least 3 markers that stand out; True if a model changed.
         """
+        if not self.config.learn_colours:
+            return False
         masks = self._labelled_masks(bgr, uv, "adapt")
         if masks is None or masks[2] < 3:
             return False

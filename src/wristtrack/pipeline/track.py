@@ -19,6 +19,7 @@ from scipy.special import chdtri
 
 from wristtrack.analysis.kinematics import analyse_file
 from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
+from wristtrack.detect.config import DetectorConfig, detector_config
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.io.atomic import write_json_atomic
@@ -47,6 +48,7 @@ def track_recording(
     overlay: Any = None,
     resume: bool = False,
     checkpoint_every: int = ckpt.CHECKPOINT_FRAMES,
+    detector: str = "default",
 ) -> dict[str, Any]:
     """Track every frame of ``recording``; write ``out``/poses.csv and ``out``/summary.json.
 
@@ -56,7 +58,8 @@ def track_recording(
     ``smooth`` replaces the filtered poses by the unscented RTS smoother's once the run is
     complete (the filtered ones stay in poses_filtered.csv).
     ``overlay`` (an overlay.OverlayWriter) receives every frame with its detections and
-    estimate. Returns the summary.
+    estimate. ``detector`` names the marker detector's preset: "default" (ours) or "paper"
+    (the paper's as published, :mod:`wristtrack.detect.paper`). Returns the summary.
 
     Interrupted runs: Ctrl-C or SIGTERM stops at the end of the frame being processed, saves a
     checkpoint (see :mod:`wristtrack.pipeline.checkpoint`; also saved every
@@ -64,15 +67,17 @@ def track_recording(
     ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
     run in ``out`` from its checkpoint, with the same result as an uninterrupted run.
     """
+    detector_settings = detector_config(detector)  # an unknown name fails before any output
     out = _output_folder(out)
     config = config or TrackerConfig()
-    settings = {**settings_dict(config), "smoothed": bool(smooth)}
+    # the detector is a setting like the others: recorded, and part of the resume fingerprint
+    settings = {**settings_dict(config), "smoothed": bool(smooth), "detector": detector}
     manual_labels = None if labels is None else (
         labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
     )
     fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
     checkpoints = ckpt.Checkpointer(out, fingerprint, checkpoint_every)
-    run, start = _open_run(recording, out, config, fingerprint, resume)
+    run, start = _open_run(recording, out, config, detector_settings, fingerprint, resume)
     bar = _progress(recording, progress)
     bar.update(start)
     states = _state_writer(out, run.tracker, resume) if smooth else _NoStates()
@@ -121,6 +126,7 @@ def _open_run(
     recording: Recording,
     out: Path,
     config: TrackerConfig,
+    detector: DetectorConfig,
     fingerprint: dict[str, Any] | None,
     resume: bool,
 ) -> tuple[_RunState, int]:
@@ -130,7 +136,8 @@ def _open_run(
     if not resume:
         ckpt.clear_stale(out)
         tracker = Tracker(recording.camera, recording.hand, config)
-        return _RunState(MarkerDetector(recording.camera), tracker, SummaryAccumulator()), 0
+        return (_RunState(MarkerDetector(recording.camera, detector), tracker,
+                          SummaryAccumulator()), 0)
     saved = ckpt.load_checkpoint(out, fingerprint)
     ckpt.truncate_outputs(out, saved)
     return _RunState(**saved.state), saved.next_index
