@@ -4,6 +4,7 @@ checker and the browser used by the page tests."""
 from __future__ import annotations
 
 import shutil
+import signal
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,6 +12,13 @@ import pytest
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 CHROMIUM_INSTALL = "apt-get install chromium (Debian/Ubuntu; .ci/run does it in CI)"
+
+# The interrupt tests send SIGINT (to this process and to `wristtrack` children). A shell
+# without job control starts a background job (`make test &`) with SIGINT ignored, and an
+# ignored signal stays ignored across exec: give it back its default meaning here (children
+# then start with the default disposition too).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
