@@ -132,6 +132,8 @@ def initialise(
     twin = None
     if layout is not None and not depth_resolves:
         fit, twin = _planar_twin(uv, depth, labels, camera, layout, fit, pixel_sigma, depth_sigma)
+        if twin is not None and twin.cost < fit.cost:  # the likelier first, always
+            fit, twin = twin, fit
     if fit.rms_px > max_rms_px:
         raise InitialisationError(
             f"initial pose fits the markers badly (RMS {fit.rms_px:.1f} px > {max_rms_px} px): "

@@ -332,16 +332,22 @@ def planar_twin(
         return f if facing_cos(f.R_ch, f.t_ch, layout) >= min_cos else None
 
     starts = _ippe_pair(P[vis], uvo[vis], camera) if vis.sum() >= 4 else []
-    fits = sorted([fit, *filter(None, (refined(R0, t0) for R0, t0 in starts))],
-                  key=lambda f: f.cost)  # fmt: skip
-    best = fits[0]
-    far = [f for f in fits[1:] if angle_between_deg(f.R_ch, best.R_ch) >= DISTINCT_DEG]
-    if far:
-        return best, far[0]
-    Rm, tm, axis = mirrored(best.R_ch, best.t_ch, layout)
-    if angle_between_deg(Rm, best.R_ch) < DISTINCT_DEG:
-        return best, None
-    return best, refined(Rm, tm, axis)
+    fits = [fit, *filter(None, (refined(R0, t0) for R0, t0 in starts))]
+    for _ in range(3):
+        fits.sort(key=lambda f: f.cost)
+        best = fits[0]
+        far = [f for f in fits[1:] if angle_between_deg(f.R_ch, best.R_ch) >= DISTINCT_DEG]
+        if far:
+            return best, far[0]
+        Rm, tm, axis = mirrored(best.R_ch, best.t_ch, layout)
+        if angle_between_deg(Rm, best.R_ch) < DISTINCT_DEG:
+            return best, None
+        twin = refined(Rm, tm, axis)
+        if twin is None or twin.cost >= best.cost:
+            return best, twin
+        # the mirror side holds a lower minimum than the starts found: free it and look again
+        fits.append(refined(twin.R_ch, twin.t_ch) or twin)
+    return best, twin
 
 
 def angle_between_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
