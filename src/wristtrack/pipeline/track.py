@@ -253,11 +253,15 @@ def _finish(
         source=str(recording.source),
         settings=settings,
         skipped_frames=run.bad_frames,
+        # what the tracker must say about its poses, e.g. an unresolved planar flip
+        warnings=list(getattr(tracker, "warnings", [])),
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),
     )
     write_json_atomic(out / "summary.json", data)
+    for warning in data["warnings"]:
+        print(f"wristtrack: warning: {warning}", file=sys.stderr)
     if interrupted:
         raise KeyboardInterrupt
     checkpoints.discard()  # complete

@@ -3,7 +3,9 @@
 - ``refine_pose``: damped Gauss-Newton on SO(3) x R^3 (left perturbation) on marker projections
   and depths, analytic Jacobian, per-marker depth weights from the sensor noise model,
   covariance of the estimate (the paper's least squares, beyond it in the weights and damping);
-- ``initial_guess``: closed-form start (3-D alignment with depth, IPPE without).
+- ``initial_guess``: closed-form start (3-D alignment with depth, IPPE without);
+- ``planar_twin``: without depth, the best pose and its mirror image about the line of sight
+  (the flip ambiguity of issue 11), each refined, for the caller to weigh.
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ def refine_pose(
     depth_sigma: float | np.ndarray | None = None,
     visible: np.ndarray | None = None,
     max_iter: int = 20,
+    frozen_axis: np.ndarray | None = None,
 ) -> PoseFit:
     """Weighted least-squares camera-to-hand pose from labelled marker projections and depths.
 
@@ -78,6 +81,9 @@ def refine_pose(
     defaults to the sensor model (``depth_noise.depth_sigma``) per marker. The projection uses
     ``camera.project`` (with distortion); the Jacobian is that of the undistorted pinhole, which
     only slows convergence slightly for mild distortion.
+
+    ``frozen_axis`` (3,) holds the rotation about that camera-frame axis at its start (steps
+    keep dphi orthogonal to it): the planar twin's tilt, see ``planar_fits``.
     """
     P, uv, depth, vis, dvis = _observed(layout, uv, depth, visible)
     n = P.shape[0]
@@ -111,6 +117,10 @@ def refine_pose(
         J = np.concatenate([Jpx / pixel_sigma, Jz / sz[:, None]])
         return J.T @ J, J.T @ r
 
+    free = None  # basis (6, 5) of the steps allowed when an axis is frozen
+    if frozen_axis is not None:
+        e = np.append(np.asarray(frozen_axis, dtype=float), np.zeros(3))
+        free = np.linalg.svd(e[None, :])[2][1:].T
     R = np.asarray(R0, dtype=float)
     t = np.asarray(t0, dtype=float).reshape(3)
     r, Xv, Xd = residuals(R, t)
@@ -128,7 +138,10 @@ def refine_pose(
         accepted = False
         while lam < 1e10:
             try:
-                delta = np.linalg.solve(A + lam * D, g)
+                if free is None:
+                    delta = np.linalg.solve(A + lam * D, g)
+                else:
+                    delta = free @ np.linalg.solve(free.T @ (A + lam * D) @ free, free.T @ g)
             except np.linalg.LinAlgError:
                 lam = max(10.0 * lam, 1e-3)
                 continue
@@ -247,3 +260,97 @@ def initial_guess(
     the scale.
     """
     return initial_guesses(uv, depth, camera, layout, visible)[0]
+
+
+# ----------------------------------------------------------------------------------------------
+# The planar flip
+
+# Two fitted poses closer than this in orientation are the same minimum (noise moves a minimum by
+# ~0.1-1 deg; the planar twin lies twice the tilt away, ~20 deg at 10 deg of tilt).
+DISTINCT_DEG = 1.0
+
+
+def _ippe_pair(
+    P: np.ndarray, uv: np.ndarray, camera: Camera
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Both IPPE poses of the points P (N,3) flattened onto their z = 0 plane: the two
+    mirror-image starts of a near-planar target (SQPnP would return one)."""
+    dist = None if camera.dist is None else np.asarray(camera.dist, dtype=float)
+    flat = np.column_stack([P[:, :2], np.zeros(P.shape[0])])
+    _, rvecs, tvecs, _ = cv2.solvePnPGeneric(flat, uv, camera.K, dist, flags=cv2.SOLVEPNP_IPPE)
+    return [(cv2.Rodrigues(rv)[0], tv.reshape(3)) for rv, tv in zip(rvecs, tvecs, strict=True)]
+
+
+def mirrored(
+    R: np.ndarray, t: np.ndarray, layout: HandLayout
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The planar twin of the pose (R, t): the back-of-hand normal reflected about the line of
+    sight to the markers' centre, the centre kept (to first order the same image, exactly so
+    under weak perspective). Returns (R', t', the axis of that tilt, unit or zero)."""
+    c = R @ layout.points.mean(axis=0) + t
+    u = c / np.linalg.norm(c)
+    n = R[:, 2]
+    axis = np.cross(n, 2.0 * (n @ u) * u - n)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:  # fronto-parallel: the twin is the pose itself
+        return R, t, np.zeros(3)
+    angle = 2.0 * np.arccos(np.clip(-(n @ u), -1.0, 1.0))
+    Rm = so3_exp(axis / s * angle) @ R
+    return Rm, c - Rm @ layout.points.mean(axis=0), axis / s
+
+
+def planar_twin(
+    uv: np.ndarray,
+    depth: np.ndarray | None,
+    camera: Camera,
+    layout: HandLayout,
+    fit: PoseFit,
+    pixel_sigma: float = 0.7,
+    depth_sigma: float | np.ndarray | None = None,
+    visible: np.ndarray | None = None,
+    min_cos: float = 0.0,
+) -> tuple[PoseFit, PoseFit | None]:
+    """(the best pose, its planar twin or None) for labelled markers seen without depth
+    (fewer than three readings; with more the 3-D alignment has one answer).
+
+    The pose fit is started from ``fit`` and both IPPE poses (a non-planar layout from those of
+    its flattened points, refined with its true heights); the lowest chi-square is the best.
+    Its twin is the other local minimum when there is one. Near fronto-parallel, noise often
+    merges the two minima into one on either side, and the twin is then the best pose mirrored
+    (``mirrored``) and refined with that mirrored tilt held: the best fit the other side of the
+    line of sight allows. None when the twin is within DISTINCT_DEG of the best (nothing to
+    confuse) or faces the camera at a cosine below ``min_cos`` (not physical).
+    """
+    P, uvo, depth, vis, _ = _observed(layout, uv, depth, visible)
+
+    def refined(R0, t0, axis=None) -> PoseFit | None:
+        try:
+            f = refine_pose(uv, depth, camera, layout, R0, t0, pixel_sigma, depth_sigma, vis,
+                            frozen_axis=axis)  # fmt: skip
+        except InitialisationError:
+            return None
+        return f if facing_cos(f.R_ch, f.t_ch, layout) >= min_cos else None
+
+    starts = _ippe_pair(P[vis], uvo[vis], camera) if vis.sum() >= 4 else []
+    fits = [fit, *filter(None, (refined(R0, t0) for R0, t0 in starts))]
+    for _ in range(3):
+        fits.sort(key=lambda f: f.cost)
+        best = fits[0]
+        far = [f for f in fits[1:] if angle_between_deg(f.R_ch, best.R_ch) >= DISTINCT_DEG]
+        if far:
+            return best, far[0]
+        Rm, tm, axis = mirrored(best.R_ch, best.t_ch, layout)
+        if angle_between_deg(Rm, best.R_ch) < DISTINCT_DEG:
+            return best, None
+        twin = refined(Rm, tm, axis)
+        if twin is None or twin.cost >= best.cost:
+            return best, twin
+        # the mirror side holds a lower minimum than the starts found: free it and look again
+        fits.append(refined(twin.R_ch, twin.t_ch) or twin)
+    return best, twin
+
+
+def angle_between_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    """The angle (degrees) of the rotation taking Ra to Rb."""
+    c = 0.5 * (np.trace(Ra.T @ Rb) - 1.0)
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))

@@ -32,8 +32,8 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import so3_log
 from wristtrack.hand import HandLayout, fit_pose
-from wristtrack.tracking import compiled
-from wristtrack.tracking.initialise import initialise
+from wristtrack.tracking import compiled, hypotheses
+from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel, ProcessNoise
 from wristtrack.tracking.neutral import StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
@@ -135,6 +135,9 @@ class Tracker:
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
         # never smooths across the change of frame
         self._track_id = -1
+        # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
+        self._flip: hypotheses.PlanarHypotheses | None = None
+        self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
 
     def __getstate__(self) -> dict:
         """Pickled without the compiled step: a numba function whose helpers are compiled only
@@ -148,6 +151,8 @@ class Tracker:
 
     def step(self, det: Detections, labels: np.ndarray | None = None) -> FrameResult:
         """Process one frame. ``labels`` (M,) optionally names the blobs for initialisation."""
+        if getattr(self, "_flip", None) is not None:  # (getattr: checkpoints from before it)
+            return hypotheses.step(self, det, labels)
         if det.timestamp <= self._last_timestamp:
             raise InputError(
                 f"timestamp {det.timestamp} s does not follow {self._last_timestamp} s; "
@@ -177,6 +182,12 @@ class Tracker:
         except InitialisationError as e:
             self.last_init_error = str(e)  # why the latest attempt failed, for the run's report
             return self._empty(det, self.status)
+        if init.alternative is not None:  # the planar twin fits as well: keep both
+            return hypotheses.start(self, det, init)
+        return self.start_track(det, init)
+
+    def start_track(self, det: Detections, init: InitResult) -> FrameResult:
+        """A new track from the initialisation ``init`` of this frame."""
         if self.R_c0 is None:  # the first initialisation fixes W0 (refined by the still start)
             self.R_c0, self.t_c0 = init.R_ch, init.t_ch
             self.layout = init.layout

@@ -338,6 +338,7 @@ def track_live(
         source=str(source.source),
         settings={**settings_dict(config), "smoothed": False, "live": True},
         skipped_frames=skipped,
+        warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
         kinematics=analyse_file(out / "poses.csv"),
