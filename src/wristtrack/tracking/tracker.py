@@ -196,16 +196,13 @@ class Tracker:
         return self._start_track(det, init)
 
     def _reacquire(self, det: Detections) -> FrameResult | None:
-        """A new track fitted to this frame, or None where the layout does not fit it.
+        """A new track fitted to this frame (W0 and layout kept), or None where none fits.
 
-        For a frame whose association found fewer than ``min_markers`` markers among at least
-        that many blobs, or whose manoeuvre retry left the markers off their blobs: the
-        prediction has left the markers (a manoeuvre beyond the
-        retry's, a stalled camera, a frame rate too low for the motion). Coasting on it for
-        ``lost_after`` frames would drift further while the markers are in plain view, and one
-        unscented update from that far off lands short of them (a 45 deg jump left 20 deg).
-        W0 and the layout are kept.
-        """
+        For a frame with fewer than ``min_markers`` markers associated among that many blobs,
+        or whose manoeuvre retry left the markers off their blobs: the prediction has left the
+        markers (a stalled camera, a frame rate too low for the motion). Coasting on it would
+        drift further while they are in plain view, and one unscented update from that far
+        off lands short of them (a 45 deg jump left 20 deg)."""
         try:
             init = initialise(det, self.camera, self.layout)
         except InitialisationError:
