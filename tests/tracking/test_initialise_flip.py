@@ -3,36 +3,24 @@ initialisation never picks the mirrored pose silently; with depth nothing change
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from benchmarks.rgb_flip import tilted_view
 from wristtrack.camera import Camera
 from wristtrack.depth_noise import KINECT_DEPTH_COEFF
 from wristtrack.detect.detections import Detections
 from wristtrack.hand import HandLayout
+from wristtrack.sim.motion import neutral_camera_pose
 from wristtrack.tracking.initialise import FLIP_LOG_EVIDENCE, initialise
 from wristtrack.tracking.pose_fit import initial_guess, mirrored, refine_pose
 
 CAM = Camera.default()
 LAYOUT = HandLayout.default()
-# camera looking at the back of a right hand, fingers up in the image
-R_N = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 SIGMA = 0.7
-
-
-def _view(rng, tilt_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """The neutral view tilted by ``tilt_deg`` about a random in-image axis, any roll."""
-    while True:
-        axis = rng.normal(size=2)
-        tilt = np.append(axis / np.linalg.norm(axis) * np.radians(tilt_deg), 0.0)
-        roll = Rotation.from_rotvec([0, 0, rng.uniform(-np.pi, np.pi)]).as_matrix()
-        R = Rotation.from_rotvec(tilt).as_matrix() @ roll @ R_N
-        t = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.06, 0.06), rng.uniform(0.5, 0.8)])
-        uv, _ = cv2.projectPoints(LAYOUT.points, cv2.Rodrigues(R)[0], t, CAM.K, None)
-        if CAM.in_image(uv.reshape(-1, 2)).all():
-            return R, t
+_view = tilted_view  # neutral view tilted about a random in-image axis, any roll
+R_N, _ = neutral_camera_pose()  # the back of a right hand, fingers up in the image
 
 
 def _flipped(R_est: np.ndarray, R: np.ndarray, t: np.ndarray) -> bool:
