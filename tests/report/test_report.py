@@ -471,3 +471,21 @@ def test_track_no_report_skips_it(tmp_path, capsys):
     assert not (tmp_path / "run" / "report.html").exists()
     assert not (tmp_path / "run" / "figures").exists()
     capsys.readouterr()
+
+
+def test_report_shows_the_runs_warnings_and_its_detector(run, tmp_path):
+    """A warning in summary.json (e.g. a colour-only start whose planar flip stayed undecided)
+    is a note in the report, never only a key in a file; the tracker line names the detector."""
+    out, _ = run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("report.html", "figures"))
+    summary = json.loads((copy / "summary.json").read_text())
+    assert summary["warnings"] == [] and summary["settings"]["detector"] == "default"
+    text = "the planar flip was not resolved within 90 frames: the kept pose may be mirrored"
+    summary["warnings"] = [text]
+    summary["settings"]["detector"] = "paper"
+    (copy / "summary.json").write_text(json.dumps(summary))
+    html_text = write_report(copy).read_text()
+    assert f'<p class="note">{text}</p>' in html_text
+    assert "detector paper" in html_text
+    assert "was not resolved" not in (out / "report.html").read_text()

@@ -162,7 +162,8 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     if settings:
         rows.append(("Tracker", f"model {settings.get('model', '?')}, association "
                                 f"{settings.get('association', '?')}, depth in updates "
-                                f"{'yes' if settings.get('use_depth') else 'no'}"
+                                f"{'yes' if settings.get('use_depth') else 'no'}, detector "
+                                f"{settings.get('detector', 'default')}"
                                 f"{', RTS-smoothed' if settings.get('smoothed') else ''}"))
     conventions = summary.get("conventions") or {}
     labels = {"angles": "Angle sequence and signs", "side": "Side", "neutral": "Neutral posture",
@@ -187,6 +188,7 @@ def _notes(summary: dict[str, Any], columns: dict[str, np.ndarray]) -> str:
             f"{int((~has).sum())} of {has.size} frames have no estimate ({n_gaps} gap"
             f"{'s' if n_gaps != 1 else ''}); curves break there and are not bridged."
         )
+    notes += [str(w) for w in summary.get("warnings") or []]  # e.g. an unresolved planar flip
     if summary.get("interrupted"):
         notes.append("The run was interrupted: the report covers the frames processed.")
     if summary.get("skipped_frames"):
