@@ -60,3 +60,22 @@ def chromium() -> str:
         if candidate and Path(candidate).exists():
             return candidate
     pytest.skip(f"no Chromium for the browser check: install it with `{CHROMIUM_INSTALL}`")
+
+
+def _interrupt_at(recording, index: int) -> None:
+    """Make ``recording`` deliver a real SIGINT to this process as frame ``index`` is read."""
+    frames = recording.frames
+
+    def interrupted(start=0):
+        for frame in frames(start):
+            if frame.index == index:
+                signal.raise_signal(signal.SIGINT)
+            yield frame
+
+    recording.frames = interrupted
+
+
+@pytest.fixture(scope="session")
+def interrupt_at() -> Callable:
+    """``interrupt_at(recording, index)``: a real Ctrl-C as that frame is read (see above)."""
+    return _interrupt_at

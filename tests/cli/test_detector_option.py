@@ -4,7 +4,6 @@ settings, refused on --resume with another detector, and one line for an unknown
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 
@@ -51,18 +50,11 @@ def test_track_with_the_paper_detector_is_a_valid_run(rec, paper_run, check_run)
     assert r["orientation_rmse_deg"] < 3.0 and r["position_rmse_mm"] < 10.0
 
 
-def test_resume_with_another_detector_is_refused(rec, paper_run, tmp_path, capsys):
+def test_resume_with_another_detector_is_refused(rec, paper_run, tmp_path, capsys,
+                                                 interrupt_at):
     out = tmp_path / "run"
     with open_recording(rec) as recording:
-        frames = recording.frames
-
-        def interrupted(start=0):
-            for frame in frames(start):
-                if frame.index == 20:
-                    signal.raise_signal(signal.SIGINT)
-                yield frame
-
-        recording.frames = interrupted
+        interrupt_at(recording, 20)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out, progress=False, checkpoint_every=10,
                             detector="paper")

@@ -4,7 +4,6 @@ skipping what is done and resuming what was interrupted."""
 
 import json
 import shutil
-import signal
 import sys
 
 import numpy as np
@@ -88,7 +87,7 @@ def test_batch_on_a_dask_local_cluster_isolates_the_broken_recordings(study, tmp
     assert not (out / ".hidden").exists()
 
 
-def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, capsys):
+def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, capsys, interrupt_at):
     out = tmp_path / "out"
     code = main(["batch", str(study), "--out", str(out), "--workers", "2", "--no-progress"])
     lines = capsys.readouterr().out.strip().splitlines()
@@ -101,15 +100,7 @@ def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, cap
     # one run interrupted part-way (a real SIGINT at frame 9), one run tracked already
     name = GOOD[0]
     with open_recording(study / name) as recording:
-        frames = recording.frames
-
-        def interrupted(start=0):
-            for frame in frames(start):
-                if frame.index == 9:
-                    signal.raise_signal(signal.SIGINT)
-                yield frame
-
-        recording.frames = interrupted
+        interrupt_at(recording, 9)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out / name, progress=False, checkpoint_every=4)
     assert (out / name / CHECKPOINT_FILE).is_file()

@@ -36,22 +36,9 @@ def reference(rec, tmp_path_factory):
     return out
 
 
-def _interrupt_at(recording, index):
-    """Make ``recording`` deliver a real SIGINT to this process as frame ``index`` is read."""
-    frames = recording.frames
-
-    def interrupted(start=0):
-        for frame in frames(start):
-            if frame.index == index:
-                signal.raise_signal(signal.SIGINT)
-            yield frame
-
-    recording.frames = interrupted
-
-
-def _run_interrupted(rec, out, index, **kw):
+def _run_interrupted(interrupt_at, rec, out, index, **kw):
     with open_recording(rec) as recording:
-        _interrupt_at(recording, index)
+        interrupt_at(recording, index)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out, progress=False, checkpoint_every=10, **kw)
 
@@ -70,9 +57,10 @@ def _data_lines(path):
 
 
 @pytest.mark.parametrize("index", [1, 23, N_FRAMES - 1])
-def test_interrupt_then_resume_gives_the_uninterrupted_result(rec, reference, tmp_path, index):
+def test_interrupt_then_resume_gives_the_uninterrupted_result(rec, reference, tmp_path, index,
+                                                              interrupt_at):
     out = tmp_path / "run"
-    _run_interrupted(rec, out, index)
+    _run_interrupted(interrupt_at, rec, out, index)
     # stopped at a frame boundary: exactly the frames before the interrupt, all complete
     assert _data_lines(out / "poses.csv") == _data_lines(reference / "poses.csv")[:index]
     assert _summary(out)["interrupted"] is True
@@ -83,11 +71,12 @@ def test_interrupt_then_resume_gives_the_uninterrupted_result(rec, reference, tm
     assert not (out / CHECKPOINT_FILE).exists()
 
 
-def test_interrupted_smoothed_run_resumes_to_the_same_smoothed_result(rec, tmp_path):
+def test_interrupted_smoothed_run_resumes_to_the_same_smoothed_result(rec, tmp_path,
+                                                                     interrupt_at):
     full, part = tmp_path / "full", tmp_path / "part"
     with open_recording(rec) as recording:
         track_recording(recording, full, progress=False, smooth=True)
-    _run_interrupted(rec, part, 30, smooth=True)
+    _run_interrupted(interrupt_at, rec, part, 30, smooth=True)
     _resume(rec, part, smooth=True)
     for name in ("poses.csv", "poses_filtered.csv", "filter_states.f64"):
         if (full / name).exists():
@@ -172,13 +161,13 @@ def _cli_error(capsys, *argv):
     return code, err
 
 
-def test_resume_refusals_are_one_line(rec, tmp_path, capsys):
+def test_resume_refusals_are_one_line(rec, tmp_path, capsys, interrupt_at):
     out = tmp_path / "run"
     code, err = _cli_error(capsys, "track", str(rec), "--out", str(out), "--resume",
                            "--no-progress")
     assert code == 2 and "nothing to resume" in err
 
-    _run_interrupted(rec, out, 20)
+    _run_interrupted(interrupt_at, rec, out, 20)
     code, err = _cli_error(capsys, "track", str(rec), "--out", str(out), "--resume",
                            "--no-progress", "--no-depth")
     assert code == 2 and "settings (use_depth)" in err
