@@ -17,9 +17,10 @@ import pytest
 
 from wristtrack.cli import main
 from wristtrack.errors import InputError
+from wristtrack.geometry import rotation_distance
 from wristtrack.io.base import Recording
 from wristtrack.io.folder import FolderRecording
-from wristtrack.io.poses import read_poses
+from wristtrack.io.poses import read_poses, rows_to_poses
 from wristtrack.pipeline.live.loop import Captured, NewestFrameSlot, track_live
 from wristtrack.pipeline.track import track_recording
 
@@ -40,16 +41,18 @@ def offline(reach, tmp_path_factory):
 
 
 def _agree(live, offline, deg, mm):
-    """Angles and positions of the frames the live run processed, against the offline run."""
+    """Poses of the frames the live run processed, against the offline run, in the camera frame:
+    W0 is the first tracked frame's hand pose, and frames dropped at the start (while the
+    compiled step loads on a busy machine) give the live run a later W0 and other angles."""
     rows = np.asarray(live["frame"], int)
     done = np.isin(live["status"], ("tracking", "coasting"))
     assert done.sum() > 0.9 * (live["status"] != "dropped").sum()
-    for col in ANGLES:
-        err = np.abs(live[col][done] - offline[col][rows[done]])
-        assert np.nanmax(err) <= deg, col
-    for col in ("tx", "ty", "tz"):
-        err = np.abs(live[col][done] - offline[col][rows[done]]) * 1e3
-        assert np.nanmax(err) <= mm, col
+    R_live, t_live = rows_to_poses(live)
+    R_off, t_off = rows_to_poses(offline)
+    ang = np.degrees(rotation_distance(R_live[done], R_off[rows[done]]))
+    assert np.nanmax(ang) <= deg
+    err = np.linalg.norm(t_live[done] - t_off[rows[done]], axis=1) * 1e3
+    assert np.nanmax(err) <= mm
 
 
 def test_newest_frame_wins_and_the_rest_are_counted():
