@@ -14,6 +14,7 @@ An offline method (a smoother) runs the whole list at once; ``online`` wraps a p
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -349,14 +350,17 @@ def summary_lines(f: dict) -> list[str]:
 # ------------------------------------------------------------------ rendered RGB-D recordings
 
 
-def recorded_detections(recording_dir) -> tuple[Camera, HandLayout | None, list, Trajectory]:
+def recorded_detections(
+    recording_dir, times: list[float] | None = None
+) -> tuple[Camera, HandLayout | None, list, Trajectory]:
     """The detector's output on every frame of a rendered recording, as ``track`` produces it
-    (the detector refines its colour models from the default tracker's first fix, so the
-    default tracker run on these detections is exactly ``track``), with the truth."""
+    (the detector learns its colours at the default tracker's first fix and adapts them as the
+    run goes on, by ``track``'s own rule, so the default tracker run on these detections is
+    exactly ``track``), with the truth. ``times`` collects each frame's detection time (s)."""
     from wristtrack.detect.detector import MarkerDetector
     from wristtrack.io.open import open_recording
     from wristtrack.io.poses import read_poses, rows_to_poses
-    from wristtrack.tracking.tracker import Status
+    from wristtrack.pipeline.track import follow_colours
 
     with open_recording(recording_dir) as recording:
         camera, hand = recording.camera, recording.hand
@@ -365,17 +369,13 @@ def recorded_detections(recording_dir) -> tuple[Camera, HandLayout | None, list,
         learned = False
         detections = []
         for frame in recording:
+            start = time.perf_counter()
             det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
+            if times is not None:
+                times.append(time.perf_counter() - start)
             detections.append(det)
             result = tracker.step(det)
-            if not learned and result.status == Status.TRACKING:
-                uv = np.full((6, 2), np.nan)
-                for blob, label in enumerate(result.labels):
-                    if label >= 0:
-                        uv[label] = det.uv[blob]
-                if np.isfinite(uv).all():
-                    detector.learn_markers(frame.bgr, uv)
-                learned = True
+            learned = follow_colours(detector, frame.bgr, det, result, frame.index, learned)
     cols = read_poses(recording_dir / "truth.csv")
     R_ch, t_ch = rows_to_poses(cols)
     angles = np.radians(np.column_stack([cols[f"{a}_deg"] for a in

@@ -214,11 +214,7 @@ def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None
         )
     if result.frame != frame.index:  # after skipped frames: the recording's numbers
         result = replace(result, frame=frame.index)
-    if not run.learned and result.status == Status.TRACKING:
-        learn_colours(run.detector, frame.bgr, det, result)
-        run.learned = True
-    elif run.learned and frame.index % ADAPT_EVERY == 0 and _confident(result):
-        learn_colours(run.detector, frame.bgr, det, result, adapt=True)
+    run.learned = follow_colours(run.detector, frame.bgr, det, result, frame.index, run.learned)
     rows.tracked(frame.index, frame.timestamp, result)
     if rows.overlay is not None:
         rows.overlay.add(frame.bgr, det, result)
@@ -330,6 +326,18 @@ ADAPT_NIS_QUANTILE = 0.95
 def _confident(result: FrameResult) -> bool:
     return (result.status == Status.TRACKING and result.n_visible >= 4 and result.nis_dof > 0
             and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
+
+
+def follow_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
+                   index: int, learned: bool) -> bool:
+    """What ``track`` does with the detector's colours after each frame: learn them at the
+    first fix, then adapt them every ADAPT_EVERY-th confident frame. Returns ``learned``."""
+    if not learned and result.status == Status.TRACKING:
+        learn_colours(detector, bgr, det, result)
+        return True
+    if learned and index % ADAPT_EVERY == 0 and _confident(result):
+        learn_colours(detector, bgr, det, result, adapt=True)
+    return learned
 
 
 def learn_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
