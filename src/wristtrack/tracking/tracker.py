@@ -67,8 +67,8 @@ class TrackerConfig:
     # A retry is kept only if its update is consistent. () = off (the paper's method).
     manoeuvre_accel: tuple[tuple[float, float], ...] = ((15.0, 15.0), (45.0, 45.0))
     # A frame still short of min_markers markers (after the retry) among enough blobs, or
-    # whose retried update left the markers off their blobs, is fitted afresh, as an
-    # initialisation would (Tracker._reacquire). False: the paper's way.
+    # whose inconsistent or retried update left the markers off their blobs, is fitted afresh,
+    # as an initialisation would (Tracker._reacquire). False: the paper's way.
     reacquire: bool = True
 
     def __post_init__(self) -> None:
@@ -199,8 +199,9 @@ class Tracker:
         """A new track fitted to this frame (W0 and layout kept), or None where none fits.
 
         For a frame with fewer than ``min_markers`` markers associated among that many blobs,
-        or whose manoeuvre retry left the markers off their blobs: the prediction has left the
-        markers (a stalled camera, a frame rate too low for the motion). Coasting on it would
+        or whose inconsistent or retried update left the markers off their blobs: the
+        prediction has left the markers (a stalled camera, a frame rate too low for the motion,
+        a long gap after a fresh start with no velocity yet). Coasting on it would
         drift further while they are in plain view, and one unscented update from that far
         off lands short of them (a 45 deg jump left 20 deg)."""
         try:
@@ -278,10 +279,10 @@ class Tracker:
         if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
             self._lose()
             return self._empty(det, Status.LOST)
-        # (An update that is merely inconsistent is not enough: realistic frames have such
-        # outliers, and one frame's fit in place of the filtered state cost accuracy on the
-        # rendered preset-real recordings; a run of them loses the track below.)
-        lost_them = n_assoc < cfg.min_markers or (out is not plain
+        # Only if its markers are off their blobs: realistic frames have harmless NIS outliers,
+        # and a one-frame fit in their place cost accuracy on the preset-real recordings.
+        doubtful = out is not plain or bool(dof and nis > _nis_limit(cfg.nis_quantile, dof))
+        lost_them = n_assoc < cfg.min_markers or (doubtful
                                                   and not self._explains(x, labels, det))
         if lost_them and cfg.reacquire and det.count >= cfg.min_markers:
             again = self._reacquire(det)
