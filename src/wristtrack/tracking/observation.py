@@ -87,3 +87,17 @@ class MarkerObservation:
             z = y_pred.reshape(self.n_markers, 3)[:, 2]
             var[:, 2] = self.noise.depth_sigma(z) ** 2
         return var.reshape(-1)
+
+
+def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
+                     pixel_sigma: float, limit: float) -> bool:
+    """Whether the markers at state ``x`` lie on the blobs labelled as them: the sum of squared
+    pixel residuals (in units of ``pixel_sigma``) within ``limit`` (a chi-square quantile for
+    2 per labelled blob). An update can pass its NIS test with a wide prior (a manoeuvre
+    retry, a fresh start) and still stop short of the blobs it was given."""
+    blobs = np.flatnonzero(labels >= 0)
+    if blobs.size == 0:
+        return False
+    at = obs(x[None])[0].reshape(-1, 2)
+    r = (uv[blobs] - at[labels[blobs]]) / pixel_sigma
+    return float(np.sum(r * r)) <= limit

@@ -36,7 +36,7 @@ from wristtrack.tracking import compiled, hypotheses
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel, ProcessNoise
 from wristtrack.tracking.neutral import StillStart, reanchor
-from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
+from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise, markers_on_blobs
 from wristtrack.tracking.results import FrameResult, Status
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
@@ -217,16 +217,9 @@ class Tracker:
         return self._start_track(det, init)
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
-        """Whether the markers at state ``x`` lie on their blobs: the squared pixel residuals
-        within the chi-square quantile. A retried update passes its NIS test with the prior
-        widened for a manoeuvre, but one unscented step from far off may stop short of the
-        blobs it was given."""
-        blobs = np.flatnonzero(labels >= 0)
-        if blobs.size == 0:
-            return False
-        uv = self._observation(False)(x[None])[0].reshape(-1, 2)
-        r = (det.uv[blobs] - uv[labels[blobs]]) / self.config.measurement.pixel_sigma
-        return float(np.sum(r * r)) <= _nis_limit(self.config.nis_quantile, 2 * blobs.size)
+        limit = _nis_limit(self.config.nis_quantile, 2 * int(np.sum(labels >= 0)))
+        return markers_on_blobs(self._observation(False), x, labels, det.uv,
+                                self.config.measurement.pixel_sigma, limit)
 
     def _start_track(self, det: Detections, init) -> FrameResult:
         """A new track (and track_id) from an initialisation, its pose expressed in W0."""
