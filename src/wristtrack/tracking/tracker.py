@@ -186,14 +186,6 @@ class Tracker:
             return hypotheses.start(self, det, init)
         return self.start_track(det, init)
 
-    def start_track(self, det: Detections, init: InitResult) -> FrameResult:
-        """A new track from the initialisation ``init`` of this frame."""
-        if self.R_c0 is None:  # the first initialisation fixes W0 (refined by the still start)
-            self.R_c0, self.t_c0 = init.R_ch, init.t_ch
-            self.layout = init.layout
-            if type(self.model) is ConstantRateModel:
-                self._still = StillStart(self.camera)
-        return self._start_track(det, init)
 
     def _reacquire(self, det: Detections) -> FrameResult | None:
         """A new track fitted to this frame (W0 and layout kept), or None where none fits.
@@ -214,15 +206,21 @@ class Tracker:
                                      self.R_c0.T @ (init.t_ch - self.t_c0))
         if not self._explains(x, init.labels, det):
             return None
-        return self._start_track(det, init)
+        return self.start_track(det, init)
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
         limit = _nis_limit(self.config.nis_quantile, 2 * int(np.sum(labels >= 0)))
         return markers_on_blobs(self._observation(False), x, labels, det.uv,
                                 self.config.measurement.pixel_sigma, limit)
 
-    def _start_track(self, det: Detections, init) -> FrameResult:
-        """A new track (and track_id) from an initialisation, its pose expressed in W0."""
+    def start_track(self, det: Detections, init: InitResult) -> FrameResult:
+        """A new track (and track_id) from the initialisation ``init`` of this frame, its pose
+        expressed in W0."""
+        if self.R_c0 is None:  # the first initialisation fixes W0 (refined by the still start)
+            self.R_c0, self.t_c0 = init.R_ch, init.t_ch
+            self.layout = init.layout
+            if type(self.model) is ConstantRateModel:
+                self._still = StillStart(self.camera)
         R = self.R_c0.T @ init.R_ch
         p = self.R_c0.T @ (init.t_ch - self.t_c0)
         # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
