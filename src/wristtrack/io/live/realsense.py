@@ -208,13 +208,15 @@ class RealSenseRecording(Recording):
             last_number = number
             t = color.get_timestamp() / 1000.0  # ms -> s
             t0 = t if t0 is None else t0
+            if index < start:  # a resumed recording is read from its start, as it was played
+                index += 1
+                continue
             # The SDK recycles its buffers: copy (or convert) before the next wait.
             bgr = self._to_bgr(color)
             raw = np.array(np.asanyarray(depth.get_data()), np.uint16, copy=True) if depth else None
             where = f"{self.source} frame {index}"
             self.check_size(bgr, where)
-            if index >= start:  # a resumed recording is read from its start, as it was played
-                yield Frame(index, t - t0, bgr, raw)
+            yield Frame(index, t - t0, bgr, raw)
             index += 1
 
     def _to_bgr(self, color: Any) -> np.ndarray:
