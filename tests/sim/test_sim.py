@@ -166,7 +166,7 @@ def test_noise_statistics_clutter_misses_shuffling():
     rvec = Rotation.from_matrix(traj.R_ch[0]).as_rotvec()
     truth = cv2.projectPoints(lay.points, rvec, traj.t_ch[0], cam.K, None)[0][:, 0]
     err = np.array(uv) - truth
-    assert np.nanstd(err) == pytest.approx(0.7, rel=0.05)
+    assert np.nanstd(err) == pytest.approx(0.3, rel=0.05)
     z_err = np.array(z) - traj.t_ch[0, 2]
     assert np.nanstd(z_err) == pytest.approx(1.425e-3 * 0.65**2, rel=0.05)
 
@@ -177,7 +177,7 @@ def test_acceptance_noise_occludes_two_markers_mid_recording():
     ((start, stop, hidden),) = noise.occlusions
     assert stop - start == 10 and {MARKER_NAMES[i] for i in hidden} == {"MCP4", "MCP5"}
     assert abs((start + stop) / 2 - len(traj) / 2) <= 1
-    assert noise.pixel_sigma == 0.7 and noise.clutter_mean == 3.0 and noise.p_miss == 0.1
+    assert noise.pixel_sigma == 0.3 and noise.clutter_mean == 3.0 and noise.p_miss == 0.1
     frames = simulate_detections(traj, cam, lay, noise, rng=5)
     for k, f in enumerate(frames):
         if start <= k < stop:

@@ -16,12 +16,15 @@ from wristtrack.hand import HandLayout
 from wristtrack.sim import motion as sim_motion
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.tracking import hypotheses
-from wristtrack.tracking.tracker import Tracker
+from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 CAM = Camera.default()
 LAYOUT = HandLayout.default()
 R_N, _ = sim_motion.neutral_camera_pose()
 NOISE = NoiseModel(pixel_sigma=0.7, clutter_mean=0.0, p_miss=0.0, depth=False)
+# the filter told the blobs' noise: the hypotheses' evidence is what is tested here
+CONFIG = TrackerConfig(measurement=MeasurementNoise(pixel_sigma=NOISE.pixel_sigma))
 
 
 def _frames(seed: int, tilt_deg: float = 10.0, moving: bool = True, seconds: float = 3.0,
@@ -55,7 +58,7 @@ def test_moving_hands_settle_on_the_right_pose_and_are_never_silently_flipped_me
     opened = 0
     for seed in range(12):
         traj, frames = _frames(seed)
-        tracker = Tracker(CAM, LAYOUT)
+        tracker = Tracker(CAM, LAYOUT, CONFIG)
         for k, f in enumerate(frames):
             r = tracker.step(f.detections)
             opened += k == 0 and tracker._flip is not None
@@ -73,7 +76,7 @@ def test_an_undecided_window_is_said_and_covered(monkeypatch):
     monkeypatch.setattr(hypotheses, "WINDOW_FRAMES", 2)
     for seed in range(10):  # a view both poses fit alike for the first frames
         traj, frames = _frames(seed, moving=False, seconds=1.0)
-        tracker = Tracker(CAM, LAYOUT)
+        tracker = Tracker(CAM, LAYOUT, CONFIG)
         results = [tracker.step(f.detections) for f in frames]
         if tracker.warnings:
             break
@@ -92,12 +95,12 @@ def test_pickled_mid_window_resumes_identically():
     """A checkpoint taken while both poses are open resumes to the same results."""
     for seed in range(10):
         _, frames = _frames(seed, moving=False)
-        tracker = Tracker(CAM, LAYOUT)
+        tracker = Tracker(CAM, LAYOUT, CONFIG)
         tracker.step(frames[0].detections)
         if tracker._flip is not None:
             break
     copy = pickle.loads(pickle.dumps(tracker))
-    for f in frames[1:40]:
+    for f in frames[1:hypotheses.WINDOW_FRAMES]:
         a, b = tracker.step(f.detections), copy.step(f.detections)
         assert a.track_id == b.track_id and np.array_equal(a.R_ch, b.R_ch)
         assert a.rot_sigma_deg == b.rot_sigma_deg
@@ -106,7 +109,7 @@ def test_pickled_mid_window_resumes_identically():
 
 def test_with_depth_no_second_hypothesis():
     traj, frames = _frames(0, noise=NoiseModel(clutter_mean=0.0, p_miss=0.0))
-    tracker = Tracker(CAM, LAYOUT)
+    tracker = Tracker(CAM, LAYOUT, CONFIG)
     for k, f in enumerate(frames):
         r = tracker.step(f.detections)
         assert tracker._flip is None

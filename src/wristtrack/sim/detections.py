@@ -33,9 +33,14 @@ class NoiseModel:
     metres. A marker is hidden when the back of the hand turns away: cosine between hand +Z and
     the marker-to-camera direction below ``min_facing_cos``. ``occlusions``: (first frame, stop
     frame exclusive, marker indices).
+
+    The centre noise is the filter's own pixel model (``MeasurementNoise.pixel_sigma``, the
+    blob-centre noise measured on rendered recordings), white and independent between markers:
+    this is the simulator to check the filter's consistency on. What breaks that model (skin
+    slide, blur, shading, structured-light depth) is the renderer's (``sim.realism``).
     """
 
-    pixel_sigma: float = 0.7
+    pixel_sigma: float = 0.3
     clutter_mean: float = 3.0
     depth_range: tuple[float, float] = (0.3, 2.0)
     p_miss: float = 0.1

@@ -65,7 +65,8 @@ def frame_constants(
     assoc_params: assoc.AssociationParams,
 ) -> tuple:
     """The step's arguments after (x, P, dt, uv, depth) for one tracker (fixed W0 and layout):
-    layout (J, 3), R_c0, t_c0, the unscented weights and the scalar constants ``par``."""
+    layout (J, 3), its skin slide (J, 3), R_c0, t_c0, the unscented weights and the scalar
+    constants ``par``."""
     n = model.dim + model.noise_dim
     w = ukf.sigma_weights(n, ukf_params.alpha, ukf_params.beta, ukf_params.kappa)
     gate_constant, half_gate = assoc.full_measurement_constants(assoc_params)
@@ -82,9 +83,9 @@ def frame_constants(
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments)
-    layout = np.ascontiguousarray(obs.layout_T.T)
+    layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)
     R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
-    return layout, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
+    return layout, slide, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
 
 
 # ----------------------------------------------------------------------------- loading
@@ -145,10 +146,10 @@ def _jit(numba) -> Callable:
     _kernel_step = numba.njit(nogil=True, error_model="numpy")(kernel.step)
     digest = _code_digest(functions)
 
-    def step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par):
+    def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
         if digest < 0:  # never: the digest is there to be part of the cache key
-            return _kernel_step(x, P, -dt, uv, depth, layout, R_c0, t_c0, wm, wc, par)
-        return _kernel_step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par)
+            return _kernel_step(x, P, -dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par)
+        return _kernel_step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par)
 
     try:
         return numba.njit(cache=True, nogil=True, error_model="numpy")(step)
@@ -181,8 +182,8 @@ def _warm_up_arguments() -> tuple:
     """Arguments of the types the tracker passes (C-contiguous writable float64 arrays, a float
     dt), so the compile done here is the one every frame uses. The values do not matter."""
     x = np.concatenate((np.eye(3).reshape(9), np.zeros(9)))
-    return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros((6, 3)), np.eye(3),
-            np.ones(3), np.ones(37), np.ones(37), np.ones(_N_PAR))  # fmt: skip
+    return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros((6, 3)), np.zeros((6, 3)),
+            np.eye(3), np.ones(3), np.ones(37), np.ones(37), np.ones(_N_PAR))  # fmt: skip
 
 
 def _first_line(err: BaseException) -> str:

@@ -113,10 +113,10 @@ def _predicted(tracker: Any, det: Detections) -> tuple | None:
     dt = det.timestamp - track.timestamp
     if dt <= 0:
         return None
-    _, _, pred = ukf.predict_with_measurement(
+    x, _, pred = ukf.predict_with_measurement(
         model, track.x, track.P, dt, model.process_noise(dt), obs, params=cfg.ukf
     )
-    S = pred.Pyy + np.diag(obs.noise_variance(pred.y))
+    S = pred.Pyy + obs.noise_covariance(x, pred.y)
     return pred.y, S, obs.k
 
 

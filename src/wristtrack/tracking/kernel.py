@@ -84,12 +84,13 @@ def _forward(L, B):
 # --------------------------------------------------------------------------- the step
 
 
-def step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par):
+def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
     """One tracking frame: (code, x, P, labels, markers associated, NIS); see the module.
 
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance; dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite); layout (J, 3) the markers in the hand
-    frame; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 sigma
+    frame; slide (J, 3) each marker's share in the common skin slide (MarkerObservation.slide);
+    R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 sigma
     points ordered 0, +columns of L, -columns of L, +noise, -noise (the weights of all but the
     first are equal, so this is ukf.sigma_offsets' set); par the constants
     (``compiled.frame_constants``).
@@ -121,6 +122,7 @@ def step(x, P, dt, uv, depth, layout, R_c0, t_c0, wm, wc, par):
 
     # associate
     _add_noise(C, mean, layout.shape[0], par)  # C's measurement block becomes Pyy + R
+    _add_skin_slide(C, q, pvw, layout, slide, R_c0, t_c0, par)
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
     if n_pairs < 0:
@@ -257,16 +259,21 @@ def _predicted(x, dt, lift, qs, qc, q, pvw):
         pvw[6 + i] = x[15 + i] + lift[9 + i]
 
 
-def _all_visible(q, pvw, layout, R_c0, t_c0, par):
-    """Tracker._expected_markers for all markers: in front, facing the camera, on the sensor."""
+def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
+    """The hand's camera-frame pose (Rc, tc) of the state (q, pvw) relative to W0."""
     R = np.empty((3, 3))
     rotation_of_quat_into(q, R)
-    Rc = np.empty((3, 3))
-    tc = np.empty(3)
     for i in range(3):
         for j in range(3):
             Rc[i, j] = R_c0[i, 0] * R[0, j] + R_c0[i, 1] * R[1, j] + R_c0[i, 2] * R[2, j]
         tc[i] = R_c0[i, 0] * pvw[0] + R_c0[i, 1] * pvw[1] + R_c0[i, 2] * pvw[2] + t_c0[i]
+
+
+def _all_visible(q, pvw, layout, R_c0, t_c0, par):
+    """Tracker._expected_markers for all markers: in front, facing the camera, on the sensor."""
+    Rc = np.empty((3, 3))
+    tc = np.empty(3)
+    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
     for j in range(layout.shape[0]):
         a, b, c = layout[j, 0], layout[j, 1], layout[j, 2]
         X = Rc[0, 0] * a + Rc[0, 1] * b + Rc[0, 2] * c + tc[0]
@@ -290,6 +297,39 @@ def _add_noise(C, mean, J, par):
         sd = depth_sigma(mean[2 * J + j], par[_DEPTH_COEFF], par[_DEPTH_FLOOR],
                          par[_DEPTH_OFFSET], par[_DEPTH_Z0])
         C[2 * J + j, 2 * J + j] += sd * sd
+
+
+def _add_skin_slide(C, q, pvw, layout, slide, R_c0, t_c0, par):
+    """MarkerObservation.noise_covariance's skin-slide part, G G^T with G its slide_jacobian at
+    the predicted state, added to the measurement block (rows axis-major)."""
+    J = layout.shape[0]
+    Rc = np.empty((3, 3))
+    tc = np.empty(3)
+    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
+    G = np.zeros((3 * J, 3))
+    moving = False
+    for j in range(J):
+        a, b, c = layout[j, 0], layout[j, 1], layout[j, 2]
+        X = Rc[0, 0] * a + Rc[0, 1] * b + Rc[0, 2] * c + tc[0]
+        Y = Rc[1, 0] * a + Rc[1, 1] * b + Rc[1, 2] * c + tc[1]
+        Z = Rc[2, 0] * a + Rc[2, 1] * b + Rc[2, 2] * c + tc[2]
+        for i in range(3):
+            s = slide[j, i]
+            if s == 0.0:
+                continue
+            moving = True
+            dx, dy, dz = Rc[0, i] * s, Rc[1, i] * s, Rc[2, i] * s
+            G[j, i] = 0.5 * par[_FX] * ((X + dx) / (Z + dz) - (X - dx) / (Z - dz))
+            G[J + j, i] = 0.5 * par[_FY] * ((Y + dy) / (Z + dz) - (Y - dy) / (Z - dz))
+            G[2 * J + j, i] = dz
+    if not moving:
+        return
+    for r in range(3 * J):
+        for c in range(r + 1):
+            t = G[r, 0] * G[c, 0] + G[r, 1] * G[c, 1] + G[r, 2] * G[c, 2]
+            C[r, c] += t
+            if c != r:
+                C[c, r] += t
 
 
 def _associate(C, mean, uv, depth, par, labels, blob_of):
@@ -405,5 +445,6 @@ def _write_state(q, pvw, out):
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
     "depth_sigma", "_cholesky", "_forward", "_sigma_points", "_moments", "_predicted",
-    "_all_visible", "_add_noise", "_associate", "_correct", "_write_state",
+    "_camera_pose", "_all_visible", "_add_noise", "_add_skin_slide", "_associate", "_correct",
+    "_write_state",
 )  # fmt: skip

@@ -84,8 +84,10 @@ class TrackerConfig:
     def paper(cls, **kw) -> TrackerConfig:
         """The paper's method: Euler-angle state, per-blob association, depth only to initialise.
 
-        No innovation-consistency loss: the paper has none (and its filter is not consistent).
+        No innovation-consistency loss: the paper has none (and its filter is not consistent);
+        no skin slide: its markers are rigid on the hand.
         """
+        kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0)))
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
@@ -209,9 +211,8 @@ class Tracker:
         return self.start_track(det, init)
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
-        limit = _nis_limit(self.config.nis_quantile, 2 * int(np.sum(labels >= 0)))
-        return markers_on_blobs(self._observation(False), x, labels, det.uv,
-                                self.config.measurement.pixel_sigma, limit)
+        limit = _nis_limit(self.config.nis_quantile, 2 * np.unique(labels[labels >= 0]).size)
+        return markers_on_blobs(self._observation(False), x, labels, det.uv, limit)
 
     def start_track(self, det: Detections, init: InitResult) -> FrameResult:
         """A new track (and track_id) from the initialisation ``init`` of this frame, its pose
@@ -360,14 +361,12 @@ class Tracker:
         x, P, pred = ukf.predict_with_measurement(
             model, track.x, track.P, dt, model.process_noise(dt), obs, params=cfg.ukf
         )
-        r_var = obs.noise_variance(pred.y)
+        R = obs.noise_covariance(x, pred.y)
         expected = self._expected_markers(x, obs)
 
         n_markers = obs.n_markers
         y_hat = pred.y.reshape(n_markers, k)[expected]
-        S = _diagonal_blocks(pred.Pyy, n_markers, k)[expected] + _diag_blocks(r_var, n_markers, k)[
-            expected
-        ]
+        S = _diagonal_blocks(pred.Pyy + R, n_markers, k)[expected]
         z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
         llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, self.assoc_params)
         gated = assoc.gate(d2, z, self.assoc_params)
@@ -377,7 +376,7 @@ class Tracker:
         if cfg.association == "jpda":
             beta = assoc.jpda_marginals(assoc.pair_scores(llr, self.assoc_params), gated)
             labels = assoc.labels_from_marginals(beta)
-            x, P = self._jpda_update(x, P, pred, r_var, z, beta, marker_ids, k)
+            x, P = self._jpda_update(x, P, pred, R, z, beta, marker_ids, k)
         else:
             if cfg.association == "gnn":
                 local = assoc.associate_gnn(assoc.pair_scores(llr, self.assoc_params), gated)
@@ -387,7 +386,7 @@ class Tracker:
             labels[local >= 0] = marker_ids[local[local >= 0]]
             rows, values = _stack_rows(labels, z, k)
             if rows.size:
-                res = ukf.update(model, x, P, pred, values, r_var[rows], rows=rows)
+                res = ukf.update(model, x, P, pred, values, R[np.ix_(rows, rows)], rows=rows)
                 x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
         n_assoc = int(np.unique(labels[labels >= 0]).size)
@@ -402,7 +401,7 @@ class Tracker:
         ok = (facing > self.config.facing_cos) & (pts[:, 2] > 0)
         return ok & self.camera.in_image(self.camera.project(pts))
 
-    def _jpda_update(self, x, P, pred, r_var, z, beta, marker_ids, k):
+    def _jpda_update(self, x, P, pred, R, z, beta, marker_ids, k):
         groups, candidates, weights = [], [], []
         for col, j in enumerate(marker_ids):
             hit = np.flatnonzero(beta[:, col] > 1e-6)
@@ -417,7 +416,7 @@ class Tracker:
             weights.append(beta[hit, col])
         if not groups:
             return x, P
-        return ukf.pda_update(self.model, x, P, pred, r_var, groups, candidates, weights)
+        return ukf.pda_update(self.model, x, P, pred, R, groups, candidates, weights)
 
     # -------------------------------------------------------------------------------- output
 
@@ -474,12 +473,6 @@ def _diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
     """The n diagonal (k, k) blocks of A (n*k, n*k) as an (n, k, k) array."""
     idx = np.arange(n)[:, None] * k + np.arange(k)
     return A[idx[:, :, None], idx[:, None, :]]
-
-
-def _diag_blocks(d: np.ndarray, n: int, k: int) -> np.ndarray:
-    out = np.zeros((n, k, k))
-    out[:, np.arange(k), np.arange(k)] = d.reshape(n, k)
-    return out
 
 
 def _stack_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
