@@ -1,0 +1,91 @@
+"""The MCP markers' common skin slide in the measurement model (MarkerObservation.slide_jacobian,
+noise_covariance): against a Monte Carlo of the slide itself, and on detections whose skin
+slides as the renderer's soft-tissue effect moves it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from wristtrack.camera import Camera
+from wristtrack.hand import MARKER_NAMES, HandLayout
+from wristtrack.sim import realism
+from wristtrack.sim.detections import NoiseModel, simulate_detections
+from wristtrack.sim.motion import Trajectory, neutral_camera_pose, scenario
+from wristtrack.sim.scenario_run import score_run
+from wristtrack.tracking.models import ConstantRateModel
+from wristtrack.tracking.observation import SLIDING_MARKERS, MarkerObservation, MeasurementNoise
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
+
+
+@pytest.mark.parametrize("dist", [None, (0.033, -0.108, 0.0, 0.0, 0.0)], ids=["pinhole", "xtion"])
+@pytest.mark.parametrize("use_depth", [True, False], ids=["depth", "colour-only"])
+def test_slide_covariance_is_the_spread_of_the_slid_markers_measurements(dist, use_depth):
+    """G G^T equals the sample covariance of the measurements of markers slid by draws of the
+    slide (hand frame, one draw shared by the four MCPs), on a tilted hand; WRIST and CMC1 rows
+    and columns are zero."""
+    base = Camera.default()
+    camera = Camera(base.fx, base.fy, base.cx, base.cy, base.width, base.height,
+                    base.depth_scale, dist)
+    layout = HandLayout.default()
+    R_c0, t_c0 = neutral_camera_pose()
+    obs = MarkerObservation(camera, layout.points, R_c0, t_c0, ConstantRateModel.pose, use_depth)
+    R = Rotation.from_euler("xyz", [25, -15, 30], degrees=True).as_matrix()
+    x = ConstantRateModel.initial_state(R, np.array([0.03, -0.02, 0.05]))
+    noise = obs.noise_covariance(x, obs(x[None])[0]) - np.diag(obs.noise_variance(
+        obs(x[None])[0]))
+
+    rng = np.random.default_rng(3)
+    slides = rng.normal(size=(40000, 3)) * np.array(MeasurementNoise().skin_slide)
+    R_ch, t_ch = R_c0 @ R, R_c0 @ np.array([0.03, -0.02, 0.05]) + t_c0
+    pts = np.repeat(layout.points[None], len(slides), axis=0)
+    pts[:, list(SLIDING_MARKERS)] += slides[:, None, :]
+    cam = pts @ R_ch.T + t_ch
+    y = camera.project(cam)
+    if use_depth:
+        y = np.concatenate([y, cam[..., 2:]], axis=-1)
+    sample = np.cov(y.reshape(len(slides), -1), rowvar=False)
+
+    assert np.linalg.norm(noise - sample) < 0.03 * np.linalg.norm(sample)
+    k = 3 if use_depth else 2
+    rigid = [j * k + a for j, name in enumerate(MARKER_NAMES) if not name.startswith("MCP")
+             for a in range(k)]
+    assert np.all(noise[rigid] == 0.0) and np.all(noise[:, rigid] == 0.0)
+
+
+def _sliding_skin_frames(name: str, seed: int):
+    """The scenario's detections with the MCP markers slid by the renderer's soft-tissue effect
+    (fingers flexing 0-70 deg every 3.3 s: up to 2.3 mm distally, 0.8 mm towards the palm)."""
+    rng = np.random.default_rng(seed)
+    truth, camera, layout = scenario(name, rng=rng)
+    noise = NoiseModel(clutter_mean=1.0, p_miss=0.05)
+    frames = []
+    for k, t in enumerate(truth.t):
+        flex = float(realism.finger_flexion_deg(t, truth.t[0]))
+        slid = HandLayout(layout.points + realism.skin_slide(flex, layout))
+        one = Trajectory(*(getattr(truth, f)[k:k + 1] for f in Trajectory.__dataclass_fields__))
+        frames += simulate_detections(one, camera, slid, noise, rng)
+    return truth, camera, layout, frames
+
+
+@pytest.mark.parametrize("name", ["flexion", "mix"])
+def test_sliding_skin_costs_little_with_the_slide_in_the_model(name):
+    """The same tracker told its markers are rigid (0.3 px, the blob noise alone) takes the
+    slide for motion: 1.2-1.6 deg here against 0.7-0.9 deg with the slide modelled. Covering the
+    slide by 0.7 px on every marker instead (as before) does nearly as well on this simulator's
+    sharp frames and steady depth (0.67-0.96 deg); on rendered recordings it does not (the
+    robustness benchmark), but it must never do better."""
+    truth, camera, layout, frames = _sliding_skin_frames(name, 1)
+
+    def rmse(noise: MeasurementNoise) -> float:
+        tracker = Tracker(camera, layout, TrackerConfig(measurement=noise))
+        results = [tracker.step(f.detections) for f in frames]
+        run = score_run(name, truth, frames, results)
+        assert run.errors.coverage == 1.0
+        return run.errors.orientation_rmse_deg
+
+    modelled = rmse(MeasurementNoise())
+    rigid = rmse(MeasurementNoise(skin_slide=(0.0, 0.0, 0.0)))
+    inflated = rmse(MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0)))
+    assert modelled < 0.8 * rigid and modelled < inflated, (modelled, rigid, inflated)
