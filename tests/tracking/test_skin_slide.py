@@ -1,6 +1,7 @@
-"""The MCP markers' common skin slide in the measurement model (MarkerObservation.slide_jacobian,
-noise_covariance): against a Monte Carlo of the slide itself, and on detections whose skin
-slides as the renderer's soft-tissue effect moves it."""
+"""The noise the markers share in the measurement model (MarkerObservation.noise_covariance): the
+MCP markers' common skin slide against a Monte Carlo of the slide itself and on detections whose
+skin slides as the renderer's soft-tissue effect moves it; the colour-depth misregistration
+against depths read off a tilted plane at shifted pixels."""
 
 from __future__ import annotations
 
@@ -33,8 +34,8 @@ def test_slide_covariance_is_the_spread_of_the_slid_markers_measurements(dist, u
     obs = MarkerObservation(camera, layout.points, R_c0, t_c0, ConstantRateModel.pose, use_depth)
     R = Rotation.from_euler("xyz", [25, -15, 30], degrees=True).as_matrix()
     x = ConstantRateModel.initial_state(R, np.array([0.03, -0.02, 0.05]))
-    noise = obs.noise_covariance(x, obs(x[None])[0]) - np.diag(obs.noise_variance(
-        obs(x[None])[0]))
+    G = obs.slide_jacobian(x)
+    noise = G @ G.T
 
     rng = np.random.default_rng(3)
     slides = rng.normal(size=(40000, 3)) * np.array(MeasurementNoise().skin_slide)
@@ -89,3 +90,33 @@ def test_sliding_skin_costs_little_with_the_slide_in_the_model(name):
     rigid = rmse(MeasurementNoise(skin_slide=(0.0, 0.0, 0.0)))
     inflated = rmse(MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0)))
     assert modelled < 0.8 * rigid and modelled < inflated, (modelled, rigid, inflated)
+
+
+def test_misregistration_covariance_is_the_spread_of_depths_read_off_the_blob():
+    """Each marker's depth read at a pixel shifted by draws of the misregistration (one shift for
+    the whole frame), where that pixel's ray meets the back of the hand (the plane through the
+    marker normal to the hand's Z): its sample covariance is G G^T, pixels untouched."""
+    camera, layout = Camera.default(), HandLayout.default()
+    R_c0, t_c0 = neutral_camera_pose()
+    obs = MarkerObservation(camera, layout.points, R_c0, t_c0, ConstantRateModel.pose, True)
+    R = Rotation.from_euler("xyz", [35, -20, 10], degrees=True).as_matrix()
+    x = ConstantRateModel.initial_state(R, np.array([0.02, 0.01, 0.0]))
+    G = obs.registration_jacobian(x)
+
+    pts = obs.marker_points(x[None])[0]
+    n = (R_c0 @ R)[:, 2]
+    uv = camera.project(pts)
+    rng = np.random.default_rng(5)
+    shift = rng.normal(size=(40000, 1, 2)) * MeasurementNoise().registration_px
+    rays = np.concatenate([camera.normalize(uv[None] + shift), np.ones((40000, 6, 1))], -1)
+    z = (pts @ n)[None] / (rays @ n)  # ray-plane intersection: z of the point on the plane
+    sample = np.cov(z - pts[:, 2], rowvar=False)
+    depth = np.arange(6) * 3 + 2
+    assert np.linalg.norm(G[depth] @ G[depth].T - sample) < 0.03 * np.linalg.norm(sample)
+    assert np.all(np.delete(G, depth, axis=0) == 0.0)
+    assert not obs_without_depth_has_it(camera, layout, R_c0, t_c0, x)
+
+
+def obs_without_depth_has_it(camera, layout, R_c0, t_c0, x) -> bool:
+    obs = MarkerObservation(camera, layout.points, R_c0, t_c0, ConstantRateModel.pose, False)
+    return bool(np.any(obs.registration_jacobian(x)))

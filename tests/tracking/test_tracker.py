@@ -14,7 +14,7 @@ from wristtrack.sim.detections import NoiseModel, acceptance_noise, simulate_det
 from wristtrack.sim.motion import SCENARIOS, neutral_camera_pose, scenario
 from wristtrack.sim.scenario_run import track_scenario
 from wristtrack.tracking.models import ConstantRateModel
-from wristtrack.tracking.observation import MarkerObservation
+from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
 
@@ -77,7 +77,11 @@ def test_filter_is_consistent_nees_and_nis_in_chi_square_bands():
     camera, layout = Camera.default(), HandLayout.default()
     R_c0, t_c0 = neutral_camera_pose()
     model = ConstantRateModel()
-    obs = MarkerObservation(camera, layout.points, R_c0, t_c0, model.pose, use_depth=True)
+    # The noise shared between markers whose spread does not depend on the pose (the skin
+    # slide); the misregistration's does, through the hand's slope, and is checked against its
+    # own Monte Carlo in test_skin_slide.py.
+    obs = MarkerObservation(camera, layout.points, R_c0, t_c0, model.pose, use_depth=True,
+                            noise=MeasurementNoise(registration_px=0.0))
     rng = np.random.default_rng(7)
     nees = np.zeros((runs, steps))
     nis = np.zeros((runs, steps))
@@ -187,7 +191,12 @@ def test_one_to_one_association_beats_the_paper_rule_with_clutter_beside_the_mar
 
     n = len(scenario("flexion")[0].t)
     noise = dataclasses.replace(acceptance_noise(n), near_clutter_mean=1.5, near_clutter_px=6.0)
-    gnn = track_scenario("flexion", TrackerConfig(association="gnn"), noise=noise, seed=4)
+    # This simulator reads each marker's depth at its true centre: no misregistration to model
+    # (modelled anyway, it widens every depth's gate and lets a little more clutter in:
+    # 1.52 deg here instead of 1.15).
+    exact = MeasurementNoise(registration_px=0.0)
+    gnn = track_scenario("flexion", TrackerConfig(association="gnn", measurement=exact),
+                         noise=noise, seed=4)
     paper = track_scenario("flexion", TrackerConfig(association="paper"), noise=noise, seed=4)
     assert gnn.labelling["clutter_as_marker"] < 0.5 * paper.labelling["clutter_as_marker"]
     assert gnn.errors.orientation_rmse_deg < paper.errors.orientation_rmse_deg

@@ -38,9 +38,11 @@ from wristtrack.tracking.kernel import (
     _FX,
     _FY,
     _GATE_CONSTANT,
+    _GRAZING_COS,
     _HALF_GATE,
     _N_PAR,
     _PIXEL_VAR,
+    _REGISTRATION_PX,
     _SCALE,
     _SQRT_QA,
     _SQRT_QW,
@@ -49,6 +51,7 @@ from wristtrack.tracking.kernel import (
     DECLINED,
     OK,
 )
+from wristtrack.tracking.observation import GRAZING_COS
 
 if TYPE_CHECKING:
     from wristtrack.tracking.models import ConstantRateModel
@@ -82,6 +85,7 @@ def frame_constants(
     par[_SQRT_QW] = math.sqrt(process.angular_accel)
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
+    par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments)
     layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)
     R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)

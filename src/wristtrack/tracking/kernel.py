@@ -37,8 +37,9 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
 # Layout of the ``par`` vector of constants (built by ``compiled.frame_constants``).
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
-    _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE, _N_PAR,
-) = range(18)  # fmt: skip
+    _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
+    _REGISTRATION_PX, _GRAZING_COS, _N_PAR,
+) = range(20)  # fmt: skip
 
 
 # ------------------------------------------------------------------------ small helpers
@@ -122,7 +123,7 @@ def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
 
     # associate
     _add_noise(C, mean, layout.shape[0], par)  # C's measurement block becomes Pyy + R
-    _add_skin_slide(C, q, pvw, layout, slide, R_c0, t_c0, par)
+    _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par)
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
     if n_pairs < 0:
@@ -299,34 +300,41 @@ def _add_noise(C, mean, J, par):
         C[2 * J + j, 2 * J + j] += sd * sd
 
 
-def _add_skin_slide(C, q, pvw, layout, slide, R_c0, t_c0, par):
-    """MarkerObservation.noise_covariance's skin-slide part, G G^T with G its slide_jacobian at
-    the predicted state, added to the measurement block (rows axis-major)."""
+def _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par):
+    """MarkerObservation.noise_covariance's shared part, G G^T with G its slide_jacobian and
+    registration_jacobian at the predicted state, added to the measurement block (rows
+    axis-major)."""
     J = layout.shape[0]
     Rc = np.empty((3, 3))
     tc = np.empty(3)
     _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
-    G = np.zeros((3 * J, 3))
-    moving = False
+    G = np.zeros((3 * J, 5))
+    s_reg = par[_REGISTRATION_PX]
     for j in range(J):
         a, b, c = layout[j, 0], layout[j, 1], layout[j, 2]
         X = Rc[0, 0] * a + Rc[0, 1] * b + Rc[0, 2] * c + tc[0]
         Y = Rc[1, 0] * a + Rc[1, 1] * b + Rc[1, 2] * c + tc[1]
         Z = Rc[2, 0] * a + Rc[2, 1] * b + Rc[2, 2] * c + tc[2]
-        for i in range(3):
+        for i in range(3):  # the skin slide along hand axis i
             s = slide[j, i]
             if s == 0.0:
                 continue
-            moving = True
             dx, dy, dz = Rc[0, i] * s, Rc[1, i] * s, Rc[2, i] * s
             G[j, i] = 0.5 * par[_FX] * ((X + dx) / (Z + dz) - (X - dx) / (Z - dz))
             G[J + j, i] = 0.5 * par[_FY] * ((Y + dy) / (Z + dz) - (Y - dy) / (Z - dz))
             G[2 * J + j, i] = dz
-    if not moving:
-        return
+        # the misregistration: the surface plane's depth one sigma off the blob in u and in v
+        d = X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]
+        steepest = par[_GRAZING_COS] * math.sqrt(X * X + Y * Y + Z * Z)
+        d = min(d, -steepest) if d < 0.0 else max(d, steepest)
+        slope = Z * Z / d
+        G[2 * J + j, 3] = -s_reg * Rc[0, 2] * slope / par[_FX]
+        G[2 * J + j, 4] = -s_reg * Rc[1, 2] * slope / par[_FY]
     for r in range(3 * J):
         for c in range(r + 1):
-            t = G[r, 0] * G[c, 0] + G[r, 1] * G[c, 1] + G[r, 2] * G[c, 2]
+            t = 0.0
+            for i in range(5):
+                t += G[r, i] * G[c, i]
             C[r, c] += t
             if c != r:
                 C[c, r] += t
@@ -445,6 +453,6 @@ def _write_state(q, pvw, out):
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
     "depth_sigma", "_cholesky", "_forward", "_sigma_points", "_moments", "_predicted",
-    "_camera_pose", "_all_visible", "_add_noise", "_add_skin_slide", "_associate", "_correct",
+    "_camera_pose", "_all_visible", "_add_noise", "_add_shared_noise", "_associate", "_correct",
     "_write_state",
 )  # fmt: skip

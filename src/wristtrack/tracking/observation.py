@@ -25,6 +25,10 @@ from wristtrack.hand import MARKER_NAMES
 # (distal X, lateral Y, palmar Z), metres.
 SKIN_SLIDE_SIGMA = (0.0015, 0.0005, 0.0005)
 SLIDING_MARKERS = tuple(j for j, name in enumerate(MARKER_NAMES) if name.startswith("MCP"))
+# A depth map registered to the colour image by the camera's factory calibration is 1-2 px off
+# it (see sim.realism): each marker's depth is read that far from its blob.
+REGISTRATION_PX = 1.5
+GRAZING_COS = 0.05  # the steepest view of the hand's surface the depth gradient is taken at
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,12 @@ class MeasurementNoise:
     pattern of the measurements (the MCPs moving together against WRIST and CMC1) and keeps the
     rest at full weight. Zeros: a rigid hand.
 
+    Registration: the depth map's offset from the colour image (``registration_px`` per axis,
+    the same for every marker), so each marker's depth is read off its blob, on the tilted back
+    of the hand: a depth error shared by the markers through the surface's slope
+    (``MarkerObservation.registration_jacobian``). Unmodelled, it moved the hand 1-2 mm along
+    the line of sight.
+
     Depth: sigma_z = max(offset + coeff (z - z0)^2, floor) (``depth_noise.depth_sigma``), by
     default Nguyen, Izadi and Lovell's measurement of a Kinect v1 / Xtion (1.3 mm at 0.65 m).
     A blob's depth is a trimmed mean of its pixels, but structured-light noise is correlated over
@@ -58,6 +68,7 @@ class MeasurementNoise:
     depth_offset: float = NGUYEN_OFFSET  # m
     depth_z0: float = NGUYEN_Z0  # m
     skin_slide: tuple[float, float, float] = SKIN_SLIDE_SIGMA  # m, hand frame X, Y, Z
+    registration_px: float = REGISTRATION_PX  # px, colour-depth offset, each axis
 
     def depth_sigma(self, z: float | np.ndarray) -> float | np.ndarray:
         """The depth sigma (m) of a marker at depth ``z`` (m)."""
@@ -134,10 +145,31 @@ class MarkerObservation:
             G[moving, 2, :] = step[..., 2]
         return G.reshape(-1, 3)
 
+    def registration_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """(6*k, 2) change of the measurements at state ``x`` (D,) per standard deviation of the
+        colour-depth misregistration along u and v: the depth of the hand's surface plane at each
+        marker (normal: the hand's Z axis) changes by dz/du = -n_x z^2 / (fx n.p) per pixel
+        (and likewise in v). Zeros without depth."""
+        G = np.zeros((self.n_markers, self.k, 2))
+        s = self.noise.registration_px
+        if self.k < 3 or s == 0.0:
+            return G.reshape(-1, 2)
+        R_rel, _ = self.pose(x[None])
+        n = (self.R_c0 @ R_rel[0])[:, 2]
+        pts = self.marker_points(x[None])[0]
+        d = pts @ n
+        steepest = GRAZING_COS * np.linalg.norm(pts, axis=1)
+        d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
+        slope = pts[:, 2] ** 2 / d
+        G[:, 2, 0] = -s * n[0] * slope / self.camera.fx
+        G[:, 2, 1] = -s * n[1] * slope / self.camera.fy
+        return G.reshape(-1, 2)
+
     def noise_covariance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
         """Full measurement noise (6*k, 6*k) at the predicted state ``x`` and measurement
-        ``y_pred``: the independent sensor noise plus the skin slide shared by the MCP markers."""
-        G = self.slide_jacobian(x)
+        ``y_pred``: the independent sensor noise plus the noise the markers share, the skin
+        slide of the MCPs and the colour-depth misregistration."""
+        G = np.hstack((self.slide_jacobian(x), self.registration_jacobian(x)))
         return np.diag(self.noise_variance(y_pred)) + G @ G.T
 
 

@@ -84,10 +84,12 @@ class TrackerConfig:
     def paper(cls, **kw) -> TrackerConfig:
         """The paper's method: Euler-angle state, per-blob association, depth only to initialise.
 
-        No innovation-consistency loss: the paper has none (and its filter is not consistent);
-        no skin slide: its markers are rigid on the hand.
+        No innovation-consistency loss: the paper has none (and its filter is not consistent).
+        No noise shared between markers (skin slide, misregistration): the paper models its
+        blobs as independent, at the 0.7 px our own filter used before it modelled them.
         """
-        kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0)))
+        kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0),
+                                                      registration_px=0.0))
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
