@@ -257,7 +257,8 @@ def accuracy_sections(
     return [
         "## Accuracy against the peers (measurement-level simulator)",
         "",
-        "The same detections for every tracker: acceptance noise (0.7 px blob noise, Poisson "
+        "The same detections for every tracker: acceptance noise "
+        f"({NoiseModel().pixel_sigma:g} px blob noise, the filter's own pixel model; Poisson "
         "clutter of 3 blobs per frame, 10% missed detections, MCP4 and MCP5 occluded for 10 "
         "frames, depth noise 1.425e-3 z^2 m), " + seeds_text + ", mean over seeds. Rows: "
         "`default` is the product; `paper model, paper's rule` the paper's method (Euler-angle "

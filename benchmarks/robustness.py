@@ -51,6 +51,10 @@ TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURA
     "Stone Soup UKF + PDA": "Stone Soup UKF + PDA",
     "paper": "paper model, paper's rule",
 }
+# The combined conditions also get the offline smoother's row: the target for the
+# smoothed range of motion (<= 0.7 deg).
+SMOOTHED = "default, smoothed (offline)"
+COMBINED_EXTRA = {SMOOTHED: "default + smoother (offline)"}
 
 
 def render_condition(cache: Path, condition: str, seed: int, n_frames: int | None) -> Path:
@@ -101,13 +105,16 @@ def robustness(
     trackers = TRACKERS if trackers is None else trackers
     out: dict[str, dict[str, dict[str, float]]] = {}
     for condition in conditions or tuple(CONDITIONS):
-        per: dict[str, list[dict[str, float]]] = {label: [] for label in trackers}
+        rows = dict(trackers)
+        if condition.startswith("all") and "default" in trackers:
+            rows.update(COMBINED_EXTRA)
+        per: dict[str, list[dict[str, float]]] = {label: [] for label in rows}
         for seed in seeds:
             folder = render_condition(cache, condition, seed, n_frames)
             camera, hand, detections, truth = recorded_detections(folder)
             uv, vis = _truth_markers(folder)
             side = "left" if CONDITIONS[condition].get("hand_side") == "left" else "right"
-            for label, row_name in trackers.items():
+            for label, row_name in rows.items():
                 row: Row = ACCURACY_ROWS[row_name]
                 results = row.run(camera, hand, detections)
                 m = score(results, truth)
@@ -192,15 +199,23 @@ def summary_lines(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
         f"- Each effect alone within 1.5x the clean orientation RMSE ({clean['rot']:.2f} deg): "
         + ("yes" if not worse else "no: " + ", ".join(worse)) + "."
     ]
-    combined = {c: rows["default"] for c, rows in acc.items() if c.startswith("all")}
-    for c, m in combined.items():
-        ok = (m["rot"] <= 1.0 and m["pos"] <= 2.0 and m["rom"] <= 1.0 and m["recall"] >= 0.98
-              and m["cover"] >= 0.99)
+    combined = {c: rows for c, rows in acc.items() if c.startswith("all") and "default" in rows}
+    for c, rows in combined.items():
+        m = rows["default"]
+        smoothed = rows.get(SMOOTHED, {}).get("rom", np.nan)
+        targets = [
+            ("<= 1.0 deg", m["rot"] <= 1.0), ("<= 2 mm", m["pos"] <= 2.0),
+            ("RoM <= 1.0 deg", m["rom"] <= 1.0), ("recall >= 98%", m["recall"] >= 0.98),
+            ("coverage >= 99%", m["cover"] >= 0.99),
+        ]
+        if np.isfinite(smoothed):
+            targets.append(("smoothed RoM <= 0.7 deg", smoothed <= 0.7))
+        missed = [name for name, ok in targets if not ok]
         out.append(
-            f"- {c}: {m['rot']:.2f} deg, {m['pos']:.1f} mm, RoM {m['rom']:.2f} deg, recall "
-            f"{100 * m['recall']:.1f}%, coverage {100 * m['cover']:.1f}% "
-            f"({'meets' if ok else 'misses'} <= 1.0 deg, <= 2 mm, RoM <= 1.0 deg, >= 98%, "
-            ">= 99%)."
+            f"- {c}: {m['rot']:.2f} deg, {m['pos']:.1f} mm, RoM {m['rom']:.2f} deg"
+            + (f" (smoothed {smoothed:.2f})" if np.isfinite(smoothed) else "")
+            + f", recall {100 * m['recall']:.1f}%, coverage {100 * m['cover']:.1f}%: "
+            + ("meets every target." if not missed else "misses " + ", ".join(missed) + ".")
         )
     left = [c for c in acc if "left" in c and "default" in acc[c]]
     if left:

@@ -26,6 +26,7 @@ import scipy
 
 from benchmarks.document import body, compose, read_blocks
 from wristtrack import __version__
+from wristtrack.sim.detections import NoiseModel
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,9 @@ def _simulated(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
         *compare,
         "## Accuracy on the measurement-level simulator",
         "",
-        "Acceptance setting: 0.7 px blob noise, Poisson clutter of 3 blobs per frame, 10% missed "
+        f"Acceptance setting: {NoiseModel().pixel_sigma:g} px blob noise (the filter's own pixel "
+        "model; the realism is the rendered sections'), Poisson clutter of 3 blobs per frame, "
+        "10% missed "
         "detections, MCP4 and MCP5 occluded for 10 frames mid-recording, Kinect-like depth noise "
         f"(1.425e-3 z^2 m). Camera-frame errors, mean over seeds {list(ctx.seeds)}.",
         "",

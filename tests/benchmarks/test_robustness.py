@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from benchmarks.accuracy import DEFAULT
-from benchmarks.robustness import CONDITIONS, recall, robustness, robustness_sections
+from benchmarks.robustness import (
+    CONDITIONS,
+    SMOOTHED,
+    recall,
+    robustness,
+    robustness_sections,
+    summary_lines,
+)
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 
 
@@ -43,3 +50,19 @@ def test_one_condition_end_to_end(tmp_path):
     lines = robustness_sections(tmp_path, n_frames=15, conditions=("clean",),
                                 trackers={"default": DEFAULT})
     assert any(line.startswith("| clean | default |") for line in lines)
+
+
+def test_summary_names_only_the_targets_a_combined_condition_misses():
+    m = {"rot": 0.8, "pos": 1.3, "rom": 1.2, "recall": 0.999, "cover": 1.0, "wrong_side": 0.0}
+    acc = {
+        "clean": {"default": {**m, "rot": 0.4}},
+        "all (preset real)": {"default": m, SMOOTHED: {**m, "rom": 0.5}},
+        "all, left hand": {"default": {**m, "rom": 0.9}, SMOOTHED: {**m, "rom": 0.8}},
+    }
+    lines = summary_lines(acc)
+    real = next(line for line in lines if line.startswith("- all (preset real)"))
+    assert real.endswith("misses RoM <= 1.0 deg.") and "(smoothed 0.50)" in real
+    left = next(line for line in lines if line.startswith("- all, left hand"))
+    assert left.endswith("misses smoothed RoM <= 0.7 deg.")
+    acc["all, left hand"][SMOOTHED]["rom"] = 0.6
+    assert summary_lines(acc)[2].endswith("meets every target.")

@@ -63,8 +63,9 @@ class NoiseModel:
 
 
 def acceptance_noise(n_frames: int) -> NoiseModel:
-    """The project's acceptance setting: 0.7 px, 3 clutter blobs/frame, 10 % misses, and MCP4
-    and MCP5 occluded for 10 frames in the middle of an ``n_frames`` recording."""
+    """The project's acceptance setting: the default pixel and depth noise, 3 clutter blobs/frame,
+    10 % misses, and MCP4 and MCP5 occluded for 10 frames in the middle of an ``n_frames``
+    recording."""
     start = max(n_frames // 2 - 5, 0)
     hidden = (MARKER_NAMES.index("MCP4"), MARKER_NAMES.index("MCP5"))
     return NoiseModel(occlusions=((start, start + 10, hidden),))

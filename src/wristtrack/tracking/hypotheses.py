@@ -32,7 +32,7 @@ import numpy as np
 from wristtrack.detect.detections import Detections
 from wristtrack.filter import ukf
 from wristtrack.tracking.initialise import FLIP_LOG_EVIDENCE, InitResult
-from wristtrack.tracking.pose_fit import DISTINCT_DEG
+from wristtrack.tracking.pose_fit import DISTINCT_DEG, better_colour_fit
 from wristtrack.tracking.results import FrameResult
 
 # How long the motion has to tell the two poses apart: 3 s at 30 fps. A still hand adds little
@@ -205,3 +205,31 @@ def _unresolved(tracker: Any, hyp: PlanarHypotheses, results: list[FrameResult])
     hyp.copies, hyp.inits = [hyp.copies[keep]], [hyp.inits[keep]]
     hyp.log_ratio = 0.0
     return _report(tracker, hyp, [results[keep]])
+
+
+# -------------------------------------------------------------------------- while tracking
+
+
+def colour_refit(tracker: Any, det: Detections, x: np.ndarray,
+                 labels: np.ndarray) -> InitResult | None:
+    """For a colour-only frame: the one-frame fit of the markers labelled in it when it explains
+    them decisively better than the updated state ``x`` and lies elsewhere
+    (``pose_fit.better_colour_fit``, at the bound that ends the planar test), else None.
+
+    The pair of planar poses is kept open at initialisation; later, a fast turn through the
+    fronto-parallel view can carry the filter's out-of-plane tilt towards the mirror image
+    while every blob stays within its gate (10-19 deg off on a fast colour-only recording).
+    """
+    blobs = np.flatnonzero(labels >= 0)
+    if blobs.size < 4:
+        return None
+    uv = np.full((tracker.layout.points.shape[0], 2), np.nan)
+    uv[labels[blobs]] = det.uv[blobs]
+    R_rel, p = tracker.model.pose(x[None])
+    R_ch = tracker.R_c0 @ R_rel[0]
+    t_ch = tracker.R_c0 @ p[0] + tracker.t_c0
+    fit = better_colour_fit(uv, tracker.camera, tracker.layout, R_ch, t_ch,
+                            tracker.config.measurement.pixel_sigma, FLIP_LOG_EVIDENCE)
+    if fit is None:
+        return None
+    return InitResult(fit.R_ch, fit.t_ch, fit.cov, labels, fit.rms_px, tracker.layout, fit.cost)

@@ -354,3 +354,40 @@ def angle_between_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
     """The angle (degrees) of the rotation taking Ra to Rb."""
     c = 0.5 * (np.trace(Ra.T @ Rb) - 1.0)
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def better_colour_fit(
+    uv: np.ndarray,
+    camera: Camera,
+    layout: HandLayout,
+    R_ch: np.ndarray,
+    t_ch: np.ndarray,
+    pixel_sigma: float,
+    log_evidence: float,
+) -> PoseFit | None:
+    """A one-frame fit of labelled markers seen without depth (``uv`` (6, 2) in layout order,
+    NaN where unseen) that explains them decisively better than the pose (R_ch, t_ch) a filter
+    holds, and lies elsewhere (DISTINCT_DEG or more away); None otherwise.
+
+    Decisively: half the drop in chi-square (the log-likelihood ratio of the fit over the held
+    pose) above ``log_evidence``, and likewise over the fit's planar twin where there is one. Seen nearly fronto-parallel, the out-of-plane tilt rests on
+    small perspective effects, and a filter's motion prior carries it past them during a fast
+    turn; one frame's pixels say so.
+    """
+    P, uvo, _, vis, _ = _observed(layout, uv, None, None)
+    if vis.sum() < 4:
+        return None
+    cam_pts = P[vis] @ R_ch.T + t_ch
+    if np.any(cam_pts[:, 2] <= 0):
+        return None
+    r = (camera.project(cam_pts) - uvo[vis]) / pixel_sigma
+    held = float(np.sum(r * r))
+    try:
+        near = refine_pose(uv, None, camera, layout, R_ch, t_ch, pixel_sigma)
+    except InitialisationError:
+        return None
+    best, twin = planar_twin(uv, None, camera, layout, near, pixel_sigma)
+    decisive = (held - best.cost) / 2 > log_evidence
+    if twin is not None:  # and the frame must rule out the other planar pose as well
+        decisive = decisive and (twin.cost - best.cost) / 2 > log_evidence
+    return best if decisive and angle_between_deg(best.R_ch, R_ch) >= DISTINCT_DEG else None

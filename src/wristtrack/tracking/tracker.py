@@ -282,6 +282,10 @@ class Tracker:
             again = self._reacquire(det)
             if again is not None:
                 return again
+        if cfg.reacquire and det.depth is None and n_assoc >= 4:
+            refit = hypotheses.colour_refit(self, det, x, labels)
+            if refit is not None:
+                return self.start_track(det, refit)
         track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
         if track.weak_frames > cfg.lost_after:
             self._lose()
