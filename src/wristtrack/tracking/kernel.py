@@ -3,7 +3,8 @@
 The same filter as the generic path (``Tracker._generic_frame``, the reference, which reads like
 the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
 chi-square gate and Cholesky correction, for the constant-rate model with pixel + depth
-measurements on an undistorted camera. A frame's arrays are tiny (37 sigma points, 12-D
+measurements (and the noise the markers share: skin slide, misregistration) on an undistorted
+camera. A frame's arrays are tiny (37 sigma points, 12-D
 tangent, 6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost;
 compiled (tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
 (tests/tracking/test_compiled.py).
