@@ -191,12 +191,7 @@ def test_one_to_one_association_beats_the_paper_rule_with_clutter_beside_the_mar
 
     n = len(scenario("flexion")[0].t)
     noise = dataclasses.replace(acceptance_noise(n), near_clutter_mean=1.5, near_clutter_px=6.0)
-    # This simulator reads each marker's depth at its true centre: no misregistration to model
-    # (modelled anyway, it widens every depth's gate and lets a little more clutter in:
-    # 1.52 deg here instead of 1.15).
-    exact = MeasurementNoise(registration_px=0.0)
-    gnn = track_scenario("flexion", TrackerConfig(association="gnn", measurement=exact),
-                         noise=noise, seed=4)
+    gnn = track_scenario("flexion", TrackerConfig(association="gnn"), noise=noise, seed=4)
     paper = track_scenario("flexion", TrackerConfig(association="paper"), noise=noise, seed=4)
     assert gnn.labelling["clutter_as_marker"] < 0.5 * paper.labelling["clutter_as_marker"]
     assert gnn.errors.orientation_rmse_deg < paper.errors.orientation_rmse_deg

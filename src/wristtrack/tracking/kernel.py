@@ -123,12 +123,12 @@ def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
         return DECLINED, x_out, P_out, labels, 0, np.nan
 
     # associate
-    _add_noise(C, mean, layout.shape[0], par)  # C's measurement block becomes Pyy + R
-    _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par)
+    _add_noise(C, mean, layout.shape[0], par)  # C's measurement block: Pyy + each blob's noise
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
     if n_pairs < 0:
         return DECLINED, x_out, P_out, labels, 0, np.nan
+    _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par)  # and now Pyy + R
 
     # update
     nis = np.nan

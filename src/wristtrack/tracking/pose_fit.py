@@ -370,9 +370,9 @@ def better_colour_fit(
     holds, and lies elsewhere (DISTINCT_DEG or more away); None otherwise.
 
     Decisively: half the drop in chi-square (the log-likelihood ratio of the fit over the held
-    pose) above ``log_evidence``, and likewise over the fit's planar twin where there is one. Seen nearly fronto-parallel, the out-of-plane tilt rests on
-    small perspective effects, and a filter's motion prior carries it past them during a fast
-    turn; one frame's pixels say so.
+    pose) above ``log_evidence``, and likewise over the fit's planar twin where there is one.
+    Seen nearly fronto-parallel, the out-of-plane tilt rests on small perspective effects, and a
+    filter's motion prior carries it past them during a fast turn; one frame's pixels say so.
     """
     P, uvo, _, vis, _ = _observed(layout, uv, None, None)
     if vis.sum() < 4:
