@@ -18,7 +18,10 @@ Measurements. Each marker is one measurement model (u, v, depth z of its centre,
 ``observation.MeasurementNoise`` at the predicted depth; pixels only for frames without depth).
 Stone Soup's associators assume one measurement per target, so the six markers are updated in
 turn, each by a PDA over all blobs of the frame (PDA does not keep two markers off one blob, our
-GNN does). Blobs without a depth reading are left out of a depth frame.
+GNN does). Blobs without a depth reading are left out of a depth frame. Updated marker by
+marker, it can take only each marker's own noise (``MarkerObservation.noise_variance``), not the
+noise the markers share (skin slide, misregistration, ``noise_covariance``): the right model for
+a rigid hand and a perfectly registered depth map, as in the plain rendered scenarios.
 """
 
 from __future__ import annotations
