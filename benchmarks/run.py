@@ -74,7 +74,7 @@ def _simulated(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
         "differ when blue blobs sit right beside the markers: the same acceptance noise plus "
         "1.5 blobs per frame within ~8 px of random markers (at their depth +- 1 cm). The "
         "paper's rule lets a blob beside a marker claim it as well; the one-to-one rules do "
-        "not. GNN is the default: as accurate as JPDA or better, and cheaper.",
+        "not. GNN is the default: one assignment per frame instead of JPDA's joint events.",
         "",
         *association,
         "",
