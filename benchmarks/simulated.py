@@ -75,8 +75,7 @@ def association_table(seeds: tuple[int, ...], near_px: float = 8.0) -> list[str]
             runs = [track_scenario(name, config, noise=noise, seed=s) for s in seeds]
             rot[name, label] = float(np.mean([r.errors.orientation_rmse_deg for r in runs]))
             lines.append(
-                f"| {name} | {label} | "
-                f"{np.mean([r.errors.orientation_rmse_deg for r in runs]):.2f} | "
+                f"| {name} | {label} | {rot[name, label]:.2f} | "
                 f"{np.mean([r.errors.position_rmse_mm for r in runs]):.2f} | "
                 f"{np.mean([r.labelling['markers_correct'] for r in runs]):.2%} | "
                 f"{np.mean([r.labelling['clutter_as_marker'] for r in runs]):.2%} |"

@@ -129,34 +129,54 @@ class MarkerObservation:
         """(6*k, 3) change of the measurements at state ``x`` (D,) per standard deviation of the
         skin slide along each hand axis: half the difference of the measurements with the
         sliding markers moved one sigma either way (exact for depth, second order for pixels)."""
-        G = np.zeros((self.n_markers, self.k, 3))
-        moving = np.flatnonzero(self.slide.any(axis=1))
-        if moving.size == 0:
-            return G.reshape(-1, 3)
-        R_rel, _ = self.pose(x[None])
-        R_ch = self.R_c0 @ R_rel[0]
-        pts = self.marker_points(x[None])[0][moving]  # (n, 3)
-        step = R_ch[None] * self.slide[moving][:, None, :]  # (n, 3 camera, 3 slide axes)
-        step = step.swapaxes(1, 2)  # (n, slide axis, camera xyz)
-        uv_plus = self.camera.project(pts[:, None, :] + step)
-        uv_minus = self.camera.project(pts[:, None, :] - step)
-        G[moving, :2, :] = ((uv_plus - uv_minus) / 2).swapaxes(1, 2)
-        if self.k == 3:
-            G[moving, 2, :] = step[..., 2]
-        return G.reshape(-1, 3)
+        return self._slide_jacobian(*self._hand_in_camera(x))
 
     def registration_jacobian(self, x: np.ndarray) -> np.ndarray:
         """(6*k, 2) change of the measurements at state ``x`` (D,) per standard deviation of the
         colour-depth misregistration along u and v: the depth of the hand's surface plane at each
         marker (normal: the hand's Z axis) changes by dz/du = -n_x z^2 / (fx n.p) per pixel
         (and likewise in v). Zeros without depth."""
+        return self._registration_jacobian(*self._hand_in_camera(x))
+
+    def shared_covariance(self, x: np.ndarray) -> np.ndarray:
+        """(6*k, 6*k) noise the markers share at state ``x``: G G^T with G the slide and the
+        registration Jacobians side by side."""
+        R_ch, pts = self._hand_in_camera(x)
+        G = np.hstack((self._slide_jacobian(R_ch, pts), self._registration_jacobian(R_ch, pts)))
+        return G @ G.T
+
+    def noise_covariance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
+        """Full measurement noise (6*k, 6*k) at the predicted state ``x`` and measurement
+        ``y_pred``: the independent sensor noise plus the noise the markers share, the skin
+        slide of the MCPs and the colour-depth misregistration."""
+        return np.diag(self.noise_variance(y_pred)) + self.shared_covariance(x)
+
+    def _hand_in_camera(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The hand's camera-frame rotation (3, 3) and marker centres (6, 3) at state x (D,)."""
+        R_rel, p = self.pose(x[None])
+        R_ch = self.R_c0 @ R_rel[0]
+        return R_ch, self.layout_T.T @ R_ch.T + (self.R_c0 @ p[0] + self.t_c0)
+
+    def _slide_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        G = np.zeros((self.n_markers, self.k, 3))
+        moving = np.flatnonzero(self.slide.any(axis=1))
+        if moving.size == 0:
+            return G.reshape(-1, 3)
+        step = R_ch[None] * self.slide[moving][:, None, :]  # (n, 3 camera, 3 slide axes)
+        step = step.swapaxes(1, 2)  # (n, slide axis, camera xyz)
+        uv_plus = self.camera.project(pts[moving][:, None, :] + step)
+        uv_minus = self.camera.project(pts[moving][:, None, :] - step)
+        G[moving, :2, :] = ((uv_plus - uv_minus) / 2).swapaxes(1, 2)
+        if self.k == 3:
+            G[moving, 2, :] = step[..., 2]
+        return G.reshape(-1, 3)
+
+    def _registration_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
         G = np.zeros((self.n_markers, self.k, 2))
         s = self.noise.registration_px
         if self.k < 3 or s == 0.0:
             return G.reshape(-1, 2)
-        R_rel, _ = self.pose(x[None])
-        n = (self.R_c0 @ R_rel[0])[:, 2]
-        pts = self.marker_points(x[None])[0]
+        n = R_ch[:, 2]
         d = pts @ n
         steepest = GRAZING_COS * np.linalg.norm(pts, axis=1)
         d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
@@ -164,13 +184,6 @@ class MarkerObservation:
         G[:, 2, 0] = -s * n[0] * slope / self.camera.fx
         G[:, 2, 1] = -s * n[1] * slope / self.camera.fy
         return G.reshape(-1, 2)
-
-    def noise_covariance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
-        """Full measurement noise (6*k, 6*k) at the predicted state ``x`` and measurement
-        ``y_pred``: the independent sensor noise plus the noise the markers share, the skin
-        slide of the MCPs and the colour-depth misregistration."""
-        G = np.hstack((self.slide_jacobian(x), self.registration_jacobian(x)))
-        return np.diag(self.noise_variance(y_pred)) + G @ G.T
 
 
 def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,

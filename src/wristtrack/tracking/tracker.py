@@ -367,7 +367,8 @@ class Tracker:
         x, P, pred = ukf.predict_with_measurement(
             model, track.x, track.P, dt, model.process_noise(dt), obs, params=cfg.ukf
         )
-        R = obs.noise_covariance(x, pred.y)
+        own = np.diag(obs.noise_variance(pred.y))
+        R = own + obs.shared_covariance(x)
         expected = self._expected_markers(x, obs)
 
         n_markers = obs.n_markers
@@ -375,8 +376,7 @@ class Tracker:
         # Each marker is matched to a blob by its own noise: the noise the markers share (skin
         # slide, misregistration) moves them together, and counted in every marker's gate
         # alone it let clutter beside a marker in. The update takes all of it.
-        S = _diagonal_blocks(pred.Pyy + np.diag(obs.noise_variance(pred.y)), n_markers, k)[
-            expected]
+        S = _diagonal_blocks(pred.Pyy + own, n_markers, k)[expected]
         z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
         llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, self.assoc_params)
         gated = assoc.gate(d2, z, self.assoc_params)
