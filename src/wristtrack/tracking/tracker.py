@@ -33,68 +33,14 @@ from wristtrack.filter import ukf
 from wristtrack.geometry import so3_log
 from wristtrack.hand import HandLayout, fit_pose
 from wristtrack.tracking import compiled, hypotheses
+from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.initialise import InitResult, initialise
-from wristtrack.tracking.models import MODELS, ConstantRateModel, ProcessNoise
+from wristtrack.tracking.models import MODELS, ConstantRateModel
 from wristtrack.tracking.neutral import StillStart, reanchor
-from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise, markers_on_blobs
+from wristtrack.tracking.observation import MarkerObservation, markers_on_blobs
 from wristtrack.tracking.results import FrameResult, Status
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
-
-
-@dataclass(frozen=True)
-class TrackerConfig:
-    model: str = "default"  # "default" (SO(3) error state, constant rate) or "paper"
-    association: str = "gnn"  # "gnn", "jpda" or "paper"
-    use_depth: bool = True  # depth of each marker in every update (when the frame has depth)
-    measurement: MeasurementNoise = MeasurementNoise()
-    process: ProcessNoise = ProcessNoise()
-    association_params: assoc.AssociationParams = assoc.AssociationParams()
-    ukf: ukf.UKFParams = ukf.UKFParams()
-    min_markers: int = 3  # fewer associated markers than this counts towards being lost
-    lost_after: int = 15  # consecutive such frames before declaring the track lost
-    max_gap: float = 0.5  # s; a longer gap between frames loses the track
-    facing_cos: float = 0.05  # a marker whose palm faces away more than this is not expected
-    # Innovation consistency: an update whose NIS exceeds this chi-square quantile is
-    # inconsistent; this many in a row lose the track (0 = never). A consistent filter sees
-    # such a run with probability (1 - quantile)^n, ~1e-15 here.
-    nis_quantile: float = 0.999
-    nis_lost_after: int = 5
-    # Manoeuvres: a frame whose association fails (fewer than min_markers markers, or an
-    # update beyond the NIS quantile) although enough blobs are there is associated again with
-    # the prior's velocity variances raised by (a dt)^2, (alpha dt)^2 for each (a m/s^2,
-    # alpha rad/s^2) in turn: an unmodelled acceleration (a fast reach peaks at ~15 m/s^2).
-    # A retry is kept only if its update is consistent. () = off (the paper's method).
-    manoeuvre_accel: tuple[tuple[float, float], ...] = ((15.0, 15.0), (45.0, 45.0))
-    # A frame still short of min_markers markers (after the retry) among enough blobs, or
-    # whose inconsistent or retried update left the markers off their blobs, is fitted afresh,
-    # as an initialisation would (Tracker._reacquire). False: the paper's way.
-    reacquire: bool = True
-
-    def __post_init__(self) -> None:
-        if self.model not in MODELS:
-            raise ValueError(f"unknown model {self.model!r}; choose one of {', '.join(MODELS)}")
-        if self.association not in assoc.METHODS:
-            raise ValueError(
-                f"unknown association {self.association!r}; choose one of "
-                f"{', '.join(assoc.METHODS)}"
-            )
-
-    @classmethod
-    def paper(cls, **kw) -> TrackerConfig:
-        """The paper's method: Euler-angle state, per-blob association, depth only to initialise.
-
-        No innovation-consistency loss: the paper has none (and its filter is not consistent).
-        No noise shared between markers (skin slide, misregistration): the paper models its
-        blobs as independent, at the 0.7 px our own filter used before it modelled them.
-        """
-        kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0),
-                                                      registration_px=0.0))
-        kw.setdefault("nis_lost_after", 0)
-        kw.setdefault("manoeuvre_accel", ())
-        kw.setdefault("reacquire", False)
-        kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles
-        return cls(association="paper", use_depth=False, **kw)
 
 
 @dataclass
