@@ -417,11 +417,14 @@ class MarkerDetector(MarkerLearning):
             agree = np.abs(own_d - frame_d) <= cfg.depth_size_tolerance * frame_d
         exp_d = np.where(agree, own_d, frame_d)
         ratio = sh.major / np.sqrt(exp_d * exp_d + 16 * cfg.psf_sigma_px**2)
-        ok = ((sh.mass >= cfg.min_area_px) & (sh.minor >= cfg.min_axis_ratio * sh.major)
-              & (sh.mass >= cfg.min_fill * np.pi / 4 * sh.major * sh.minor))
+        ok = (sh.mass >= cfg.min_area_px) & (sh.minor >= cfg.min_axis_ratio * sh.major)
         with np.errstate(invalid="ignore"):
             ok &= ~((ratio < cfg.min_size_ratio) | (ratio > cfg.max_size_ratio))
             long = ok & (ratio > cfg.merge_ratio)
+        # A long blob may be two markers side by side, foreshortened at an angle to the line
+        # joining them: that pair fills its moment ellipse poorly, so the fill test judges
+        # the two parts, not the pair.
+        filled = self._filled(sh)
         blobs = []
         for k in np.flatnonzero(ok).tolist():
             reason = "border" if st.border[k] else ""
@@ -431,10 +434,16 @@ class MarkerDetector(MarkerLearning):
                     blobs.extend(parts)
                     continue
                 reason = reason or "elongated"
+            if not filled[k]:
+                continue
             if not reason and sh.skew[k] > cfg.max_skew:
                 reason = "clipped"
             blobs.append(self._blob(st, k, float(exp_d[k]), reason))
         return blobs
+
+    def _filled(self, sh: Shapes) -> np.ndarray:
+        """Whether each blob's weight fills enough of its moment ellipse (a regular shape)."""
+        return sh.mass >= self.config.min_fill * np.pi / 4 * sh.major * sh.minor
 
     @staticmethod
     def _blob(st: _Stack, k: int, expected: float, reason: str) -> Blob:
@@ -465,4 +474,6 @@ class MarkerDetector(MarkerLearning):
                      None if st.depth is None else st.depth[[k, k]],
                      st.similarity[[k, k]], st.border[[k, k]])
         self._measure(two)
+        if not self._filled(two.shape).all():
+            return []
         return [self._blob(two, j, expected, "split") for j in range(2)]
