@@ -11,9 +11,11 @@ keeps the others as they were (each section says when, where and how it was meas
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import platform
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -307,6 +309,36 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown section {', '.join(unknown)}: choose from {', '.join(SECTIONS)}")
     ctx = Context(quick=args.quick, seeds=(0,) if args.quick else tuple(range(args.seeds)),
                   soak=not args.no_soak, cache=Path(tempfile.gettempdir()) / "wristtrack-bench")
+    with contextlib.ExitStack() as stack:
+        if not stack.enter_context(_cache_lock(ctx.cache)):
+            print(f"error: another benchmark run is using {ctx.cache} (its renders would be "
+                  "overwritten under it); wait for it, or give this one its own TMPDIR",
+                  file=sys.stderr)
+            return 2
+        return _run(args, ctx)
+
+
+@contextlib.contextmanager
+def _cache_lock(cache: Path):
+    """Yields whether this process holds the render cache: two runs rendering into one cache
+    overwrite each other's recordings mid-read (a run measured that way reported a recording
+    that tracks fine as 'failed to track')."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock, as before
+        yield True
+        return
+    cache.mkdir(parents=True, exist_ok=True)
+    with open(cache / ".lock", "w") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            yield False
+            return
+        yield True
+
+
+def _run(args: argparse.Namespace, ctx: Context) -> int:
     options = "--quick" if args.quick else f"--seeds {args.seeds}"
     options += " --no-soak" if args.no_soak else ""
     blocks = read_blocks(args.out.read_text()) if args.out.is_file() else {}
