@@ -202,9 +202,15 @@ def _unresolved(tracker: Any, hyp: PlanarHypotheses, results: list[FrameResult])
         "(rot_sigma_deg covers both): record with depth, or tilt the back of the hand "
         "towards the camera at the start"
     )
-    hyp.copies, hyp.inits = [hyp.copies[keep]], [hyp.inits[keep]]
+    # the kept copy goes on under an id above both copies' (reported as 2 id + 0): shown under
+    # the other's id, its rows would join the mirror image's in one track for the smoother
+    kept = hyp.copies[keep]
+    kept._track_id = max(c._track_id for c in hyp.copies) + 1
+    hyp.copies, hyp.inits = [kept], [hyp.inits[keep]]
     hyp.log_ratio = 0.0
-    return _report(tracker, hyp, [results[keep]])
+    result = replace(results[keep], track_id=kept._track_id) if results[keep].has_estimate \
+        else results[keep]
+    return _report(tracker, hyp, [result])
 
 
 # -------------------------------------------------------------------------- while tracking
