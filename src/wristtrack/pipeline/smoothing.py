@@ -20,6 +20,7 @@ import numpy as np
 
 from wristtrack.errors import InputError
 from wristtrack.filter.ukf import UKFParams
+from wristtrack.geometry import matrix_from_quat
 from wristtrack.io.atomic import write_text_atomic
 from wristtrack.io.poses import COLUMNS, pose_row, read_pose_table
 from wristtrack.io.states import STATES_FILE, read_states
@@ -35,8 +36,6 @@ _DEFAULT_PARAMS = UKFParams()
 def smooth_run(
     out: str | Path,
     model,
-    R_c0: np.ndarray,
-    t_c0: np.ndarray,
     params: UKFParams = _DEFAULT_PARAMS,
     side: str = "right",
 ) -> list[FrameResult]:
@@ -54,7 +53,7 @@ def smooth_run(
         )
     col = {name: j for j, name in enumerate(header)}
     results = [
-        _filtered_result(row, col, states, k, model, R_c0, t_c0, side) for k, row in enumerate(body)
+        _filtered_result(row, col, states, k, model, side) for k, row in enumerate(body)
     ]
     tracked = [r for r in results if r is not None]
     smoothed = iter(smooth_results(model, tracked, params))
@@ -90,7 +89,7 @@ def smooth_run(
     return summary_results
 
 
-def _filtered_result(row, col, states, k, model, R_c0, t_c0, side) -> FrameResult | None:
+def _filtered_result(row, col, states, k, model, side) -> FrameResult | None:
     """The tracker's result for poses.csv row ``row``, rebuilt from the row and the state log;
     None for a row the tracker never saw (a skipped frame)."""
     status = _STATUSES.get(row[col["status"]])
@@ -111,13 +110,22 @@ def _filtered_result(row, col, states, k, model, R_c0, t_c0, side) -> FrameResul
             nis_dof=0 if math.isnan(dof) else int(dof), side=side,
         )
     x = states.x[k]
-    R_all, p_all = model.pose(x[None])
-    R, p = R_all[0], p_all[0]
     v, w = model.velocities(x)
+    # the poses as the filter wrote them: W0 changes at the end of the still start, and its
+    # rows are reported against W0 as refined so far (Tracker._provisional_w0)
+    R_ch, t_ch = _pose(number, "cam_q", "cam_t")
+    R, p = _pose(number, "q", "t")
     return FrameResult(
-        frame=int(row[col["frame"]]), timestamp=timestamp, status=status, R_ch=R_c0 @ R,
-        t_ch=R_c0 @ p + t_c0, R=R, p=p, v=np.asarray(v), w=np.asarray(w), cov=states.P[k],
+        frame=int(row[col["frame"]]), timestamp=timestamp, status=status, R_ch=R_ch,
+        t_ch=t_ch, R=R, p=p, v=np.asarray(v), w=np.asarray(w), cov=states.P[k],
         labels=np.empty(0, int), n_visible=n_visible, n_clutter=n_clutter, nis=nis,
         nis_dof=0 if math.isnan(dof) else int(dof), pos_sigma_mm=number("pos_sigma_mm"),
         rot_sigma_deg=number("rot_sigma_deg"), x=x, track_id=int(states.track_id[k]), side=side,
     )
+
+
+def _pose(number, q: str, t: str) -> tuple[np.ndarray, np.ndarray]:
+    """A rotation and translation from a row's quaternion (w, x, y, z) and translation columns
+    named ``q``w.. and ``t``x.. (``number`` reads a column)."""
+    quat = np.array([number(q + c) for c in "wxyz"])
+    return matrix_from_quat(quat), np.array([number(t + c) for c in "xyz"])

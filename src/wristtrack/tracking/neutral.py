@@ -34,6 +34,23 @@ MIN_FRAMES = 5  # fewer usable frames before the hand moves: keep the one-frame 
 STILL_PX = 2.5  # markers this far (px, median) from where the still start found them: moving
 STILL_SPEED = 0.03  # m/s; or the filter sees the hand move this fast
 STILL_RATE = 0.25  # rad/s
+# ... and tells it from its own noise: a fresh track's velocities are uncertain (0.6 rad/s after
+# its first update), and under realistic depth noise the estimate alone passed STILL_RATE in the
+# first frame and ended a still start of 20 frames after one, leaving W0 2 deg off.
+STILL_SIGNIFICANCE = 11.34  # chi-square, 3 dof, 0.99
+
+
+def _moving(velocity: np.ndarray, cov: np.ndarray | None, threshold: float) -> bool:
+    """Whether a velocity says the hand moves: above ``threshold`` and, with its covariance,
+    significantly different from zero (NaN, as the paper model's angular velocity: no)."""
+    if not np.linalg.norm(velocity) > threshold:
+        return False
+    if cov is None:
+        return True
+    try:
+        return float(velocity @ np.linalg.solve(cov, velocity)) > STILL_SIGNIFICANCE
+    except np.linalg.LinAlgError:
+        return True
 
 
 class StillStart:
@@ -47,9 +64,12 @@ class StillStart:
         self.depth: list[np.ndarray] = []
         self.closed = False
 
-    def add(self, det: Detections, labels: np.ndarray, v: np.ndarray, w: np.ndarray) -> bool:
-        """Take one tracked frame (blob ``labels``, the filter's velocities ``v``, ``w``);
-        True once the still start is over (enough frames, or the hand started moving)."""
+    def add(self, det: Detections, labels: np.ndarray, v: np.ndarray, w: np.ndarray,
+            cov_v: np.ndarray | None = None, cov_w: np.ndarray | None = None) -> bool:
+        """Take one tracked frame (blob ``labels``, the filter's velocities ``v``, ``w`` and,
+        where known, their covariances); True once the still start is over (enough frames, or
+        the hand started moving: its markers moved, or the filter's velocity is above its
+        threshold and, given its covariance, significantly so)."""
         if self.closed:
             return True
         blobs = np.flatnonzero(labels >= 0)
@@ -60,7 +80,7 @@ class StillStart:
             d = np.linalg.norm(uv - self.uv[0], axis=1)
             if np.isfinite(d).any():
                 moved = float(np.nanmedian(d))
-        if (moved > STILL_PX or np.linalg.norm(v) > STILL_SPEED or np.linalg.norm(w) > STILL_RATE
+        if (moved > STILL_PX or _moving(v, cov_v, STILL_SPEED) or _moving(w, cov_w, STILL_RATE)
                 or len(self.uv) >= self.n_frames):
             self.closed = True
             return True
@@ -84,14 +104,14 @@ class StillStart:
 
 
     def w0(self, layout: HandLayout, R0: np.ndarray, t0: np.ndarray,
-           noise: MeasurementNoise | None = None):
+           noise: MeasurementNoise | None = None, min_frames: int = MIN_FRAMES):
         """(R_ch, t_ch, cov (6,6)) of the hand over the still start with ``layout``: one pose
         fitted to every frame's markers (start R0, t0), weighted as the filter weighs them
         (``noise``: its pixel sigma and depth model, floor included: a structured-light
         camera's depth errors are correlated in time too, so more frames do not make depth
-        sharper than that floor); None with too few frames or no fit.
+        sharper than that floor); None with fewer than ``min_frames`` frames or no fit.
         """
-        if len(self.uv) < MIN_FRAMES:
+        if len(self.uv) < max(min_frames, 1):
             return None
         n = len(self.uv)
         stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times

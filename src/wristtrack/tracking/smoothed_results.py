@@ -40,14 +40,19 @@ def smooth_results(
     """The run's results with every estimate replaced by its smoothed value.
 
     Poses, velocities, covariances and uncertainties are smoothed; everything the filter saw
-    (labels, markers, clutter, NIS) is kept. W0 is recovered from the filtered results
-    (R_ch = R_c0 R, t_ch = R_c0 p + t_c0), so the results are all that is needed.
+    (labels, markers, clutter, NIS) is kept. The frames are recovered from the filtered results,
+    so the results are all that is needed: the states' W0 from the camera pose and the state
+    of the first (R_ch = R_c0 R(x), t_ch = R_c0 p(x) + t_c0), and the W0 the track's poses are
+    reported in from the camera and relative pose of its last. The two differ only in a still
+    start, whose rows are reported against W0 as refined so far (Tracker._provisional_w0):
+    the smoothed still start is reported against the W0 of its last frame, the refined one.
     """
     out = list(results)
     for seg in track_segments(results):
-        first = results[seg[0]]
-        R_c0 = first.R_ch @ first.R.T
-        t_c0 = first.t_ch - R_c0 @ first.p
+        R_c0, t_c0 = _w0(results[seg[0]], *(a[0] for a in model.pose(results[seg[0]].x[None])))
+        last = results[seg[-1]]
+        R_rep, t_rep = _w0(last, last.R, last.p)
+        turn = R_rep.T @ R_c0
         xs = np.stack([results[i].x for i in seg])
         Ps = np.stack([results[i].cov for i in seg])
         times = np.array([results[i].timestamp for i in seg])
@@ -65,17 +70,24 @@ def smooth_results(
                 )
             R_prev = R
             var = Ps_s[j].diagonal()
+            R_ch, t_ch = R_c0 @ R, R_c0 @ p + t_c0
             out[i] = replace(
                 results[i],
-                R_ch=R_c0 @ R,
-                t_ch=R_c0 @ p + t_c0,
-                R=R.copy(),
-                p=p.copy(),
-                v=np.array(v, dtype=float),
-                w=np.array(w, dtype=float),
+                R_ch=R_ch,
+                t_ch=t_ch,
+                R=R_rep.T @ R_ch,
+                p=R_rep.T @ (t_ch - t_rep),
+                v=turn @ np.asarray(v, dtype=float),
+                w=turn @ np.asarray(w, dtype=float),
                 cov=Ps_s[j],
                 x=xs_s[j],
                 pos_sigma_mm=1e3 * math.sqrt(max(var[model.position].sum(), 0.0)),
                 rot_sigma_deg=math.degrees(math.sqrt(max(var[model.rotation].sum(), 0.0))),
             )
     return out
+
+
+def _w0(result: FrameResult, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The W0 (R_c0, t_c0) in which relative pose (R, p) is ``result``'s camera pose."""
+    R_c0 = result.R_ch @ R.T
+    return R_c0, result.t_ch - R_c0 @ p

@@ -243,13 +243,28 @@ class Tracker:
                 self._lose()  # the estimate no longer explains the markers: start again
                 return self._empty(det, Status.LOST)
         track.x, track.P, track.timestamp = x, P, det.timestamp
-        if self._still is not None and self._still.add(det, labels, *self.model.velocities(x)):
+        if self._still is not None and self._still.add(det, labels, *self.model.velocities(x),
+                                                       *self._velocity_covariances(P)):
             self._end_still_start(track)
         status = Status.TRACKING if n_assoc else Status.COASTING
         self.status = status
         one_to_one = cfg.association == "gnn"  # then the blobs not taken are the clutter
         n_clutter = len(labels) - n_assoc if one_to_one else int(np.sum(labels < 0))
         return self._result(det, status, labels, n_assoc, nis, dof, dt, n_clutter)
+
+    def _provisional_w0(self) -> tuple | None:
+        """During the still start, W0 fitted to its frames so far, else None."""
+        still = self._still
+        if still is None or not still.uv:
+            return None
+        return still.w0(self.layout, self.R_c0, self.t_c0, self.config.measurement,
+                        min_frames=1)
+
+    def _velocity_covariances(self, P: np.ndarray) -> tuple:
+        """The covariances of the state's velocity and angular velocity (None: not in it)."""
+        return tuple(P[part, part] if part is not None else None
+                     for part in (getattr(self.model, "velocity", None),
+                                  getattr(self.model, "angular_velocity", None)))
 
     def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
         """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof)."""
@@ -396,6 +411,16 @@ class Tracker:
             n_clutter = int(np.sum(labels < 0))
         var = track.P.diagonal()
         w0 = self.w0_cov.diagonal()  # W0's own uncertainty is part of every relative pose's
+        provisional = self._provisional_w0()
+        if provisional is not None:
+            # reported against W0 as fitted to the still frames so far (the state stays in the
+            # first frame's W0 until the still start ends): no step of the one-frame W0's
+            # error in the angles when W0 is refined
+            R_k, t_k, cov_k = provisional
+            turn = R_k.T @ self.R_c0
+            R_rel, p = R_k.T @ R_ch, R_k.T @ (t_ch - t_k)
+            v, w = turn @ v, turn @ w
+            w0 = cov_k.diagonal()
         rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum() + w0[:3].sum(), 0.0)))
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum() + w0[3:].sum(), 0.0))
         return FrameResult(
