@@ -13,7 +13,7 @@ import numpy as np
 
 from wristtrack.filter.smoother import rts_smooth
 from wristtrack.filter.ukf import ManifoldModel, UKFParams
-from wristtrack.geometry import so3_log
+from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.tracking.results import FrameResult
 
 _DEFAULT_PARAMS = UKFParams()
@@ -71,12 +71,13 @@ def smooth_results(
             R_prev = R
             var = Ps_s[j].diagonal()
             R_ch, t_ch = R_c0 @ R, R_c0 @ p + t_c0
+            R_out, p_out = relative_pose(R_rep, t_rep, R_ch, t_ch)
             out[i] = replace(
                 results[i],
                 R_ch=R_ch,
                 t_ch=t_ch,
-                R=R_rep.T @ R_ch,
-                p=R_rep.T @ (t_ch - t_rep),
+                R=R_out,
+                p=p_out,
                 v=turn @ np.asarray(v, dtype=float),
                 w=turn @ np.asarray(w, dtype=float),
                 cov=Ps_s[j],

@@ -30,7 +30,7 @@ from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
-from wristtrack.geometry import so3_log
+from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose
 from wristtrack.tracking import compiled, hypotheses
 from wristtrack.tracking.config import TrackerConfig
@@ -418,7 +418,7 @@ class Tracker:
             # error in the angles when W0 is refined
             R_k, t_k, cov_k = provisional
             turn = R_k.T @ self.R_c0
-            R_rel, p = R_k.T @ R_ch, R_k.T @ (t_ch - t_k)
+            R_rel, p = relative_pose(R_k, t_k, R_ch, t_ch)
             v, w = turn @ v, turn @ w
             w0 = cov_k.diagonal()
         rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum() + w0[:3].sum(), 0.0)))
