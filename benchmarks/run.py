@@ -309,8 +309,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown section {', '.join(unknown)}: choose from {', '.join(SECTIONS)}")
     ctx = Context(quick=args.quick, seeds=(0,) if args.quick else tuple(range(args.seeds)),
                   soak=not args.no_soak, cache=Path(tempfile.gettempdir()) / "wristtrack-bench")
-    with contextlib.ExitStack() as stack:
-        if not stack.enter_context(_cache_lock(ctx.cache)):
+    with _cache_lock(ctx.cache) as mine:
+        if not mine:
             print(f"error: another benchmark run is using {ctx.cache} (its renders would be "
                   "overwritten under it); wait for it, or give this one its own TMPDIR",
                   file=sys.stderr)
