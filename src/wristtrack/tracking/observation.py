@@ -173,17 +173,23 @@ class MarkerObservation:
 
     def _registration_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
         G = np.zeros((self.n_markers, self.k, 2))
-        s = self.noise.registration_px
-        if self.k < 3 or s == 0.0:
-            return G.reshape(-1, 2)
-        n = R_ch[:, 2]
-        d = pts @ n
-        steepest = GRAZING_COS * np.linalg.norm(pts, axis=1)
-        d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
-        slope = pts[:, 2] ** 2 / d
-        G[:, 2, 0] = -s * n[0] * slope / self.camera.fx
-        G[:, 2, 1] = -s * n[1] * slope / self.camera.fy
+        if self.k == 3:
+            G[:, 2, :] = registration_depth_jacobian(pts, R_ch[:, 2], self.noise.registration_px,
+                                                     self.camera.fx, self.camera.fy)
         return G.reshape(-1, 2)
+
+
+def registration_depth_jacobian(points: np.ndarray, normals: np.ndarray, registration_px: float,
+                                fx: float, fy: float) -> np.ndarray:
+    """(K, 2) change of the depth read at camera-frame ``points`` (K, 3) on surfaces with
+    ``normals`` ((K, 3) or (3,)) per ``registration_px`` of colour-depth offset along u and v:
+    dz/du = -n_x z^2 / (fx n.p) (likewise in v), the slope taken no steeper than GRAZING_COS."""
+    normals = np.broadcast_to(normals, points.shape)
+    d = np.einsum("kj,kj->k", points, normals)
+    steepest = GRAZING_COS * np.linalg.norm(points, axis=1)
+    d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
+    slope = registration_px * points[:, 2] ** 2 / d
+    return np.column_stack((-normals[:, 0] * slope / fx, -normals[:, 1] * slope / fy))
 
 
 def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
