@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -16,12 +16,15 @@ class Detections:
     ``uv`` is (M, 2) pixels; ``depth`` is (M,) metres along the camera z axis with NaN where the
     sensor gave no reading, or None when the recording has no depth at all. A depth that cannot
     be a reading (zero, negative, infinite) is taken as NaN; a non-finite centre is an
-    InputError.
+    InputError. ``depth_image`` is the raw depth frame (H, W) the blobs' depths were read from
+    (registered to colour, camera.depth_scale units), where the detector had one: the tracker
+    reads the skin between the markers in it (tracking/surface.py).
     """
 
     timestamp: float
     uv: np.ndarray
     depth: np.ndarray | None = None
+    depth_image: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)

@@ -203,7 +203,7 @@ class MarkerDetector(MarkerLearning):
         self.last_blobs = blobs
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
-        return Detections(timestamp, uv, d)
+        return Detections(timestamp, uv, d, depth_image=depth)
 
     def _short(self, blobs: list[Blob]) -> bool:
         """Fewer blobs than the last frame had markers (at most six): some may be missed."""
