@@ -8,6 +8,7 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.tracking.models import MODELS, ProcessNoise
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.surface import SurfaceSettings
 
 
 @dataclass(frozen=True)
@@ -15,6 +16,9 @@ class TrackerConfig:
     model: str = "default"  # "default" (SO(3) error state, constant rate) or "paper"
     association: str = "gnn"  # "gnn", "jpda" or "paper"
     use_depth: bool = True  # depth of each marker in every update (when the frame has depth)
+    # The skin between the markers as depth patches, learned over the still start and used in
+    # every update with depth (tracking/surface.py); None: the markers' depth alone.
+    surface: SurfaceSettings | None = SurfaceSettings()
     measurement: MeasurementNoise = MeasurementNoise()
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
@@ -54,12 +58,14 @@ class TrackerConfig:
 
         No innovation-consistency loss: the paper has none (and its filter is not consistent).
         No noise shared between markers (skin slide, misregistration): the paper models its
-        blobs as independent, at the 0.7 px our own filter used before it modelled them.
+        blobs as independent, at the 0.7 px our own filter used before it modelled them. No
+        depth of the skin between the markers.
         """
         kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0),
                                                       registration_px=0.0))
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
+        kw.setdefault("surface", None)
         kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles
         return cls(association="paper", use_depth=False, **kw)

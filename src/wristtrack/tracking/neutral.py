@@ -12,6 +12,8 @@ over the first tracked frames while the filter says the hand is still, and then 
   :func:`wristtrack.tracking.pose_fit.refine_pose` over the stacked markers), with its
   covariance, which the tracker adds to the uncertainty of every relative pose. (Not the
   filtered pose: at rest the filter, tuned to follow motion, is no better than one frame.)
+- the frames' depth images, from which the tracker learns the shape of the skin between the
+  markers (:func:`wristtrack.tracking.surface.learn_surface`).
 
 :func:`reanchor` re-expresses the filter's state (default model) in the refined hand frame and
 W0, so tracking goes on without a jump.
@@ -62,6 +64,7 @@ class StillStart:
         self.frames: list[np.ndarray] = []  # (6,3) camera-frame centres, all six with depth
         self.uv: list[np.ndarray] = []  # (6,2) and (6,) of every frame, NaN where unlabelled
         self.depth: list[np.ndarray] = []
+        self.depth_images: list[np.ndarray] = []  # the frames' raw depth, for the skin's shape
         self.closed = False
 
     def add(self, det: Detections, labels: np.ndarray, v: np.ndarray, w: np.ndarray,
@@ -88,6 +91,8 @@ class StillStart:
             z[labels[blobs]] = det.depth[blobs]
         self.uv.append(uv)
         self.depth.append(z)
+        if det.depth is not None and det.depth_image is not None:
+            self.depth_images.append(det.depth_image)
         if np.isfinite(z).all():
             self.frames.append(self.camera.backproject(uv, z))
         return False

@@ -32,11 +32,11 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose
-from wristtrack.tracking import compiled, hypotheses
+from wristtrack.tracking import compiled, hypotheses, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
-from wristtrack.tracking.neutral import StillStart, reanchor
+from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, markers_on_blobs
 from wristtrack.tracking.results import FrameResult, Status
 
@@ -81,6 +81,9 @@ class Tracker:
         self._still: StillStart | None = None
         self._layout_measured = self.layout is None
         self.w0_cov = np.zeros((6, 6))
+        # the skin between the markers, learned over the still start (tracking/surface.py)
+        self.surface: surface.DorsumSurface | None = None
+        self._pixel_rays: np.ndarray | None = None  # surface.pixel_rays, on first use
         # results' track_id: a new one at every initialisation and where the still start moves
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
         # never smooths across the change of frame
@@ -95,6 +98,7 @@ class Tracker:
         loads it again on its next frame."""
         state = self.__dict__.copy()
         state["_compiled"] = state["_compiled_usable"] = None
+        state["_pixel_rays"] = None  # a lookup table, rebuilt on first use
         return state
 
     # ------------------------------------------------------------------------------- stepping
@@ -197,6 +201,9 @@ class Tracker:
             track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0)
         track.R_prev = track.x[:9].reshape(3, 3)
         self.layout = new
+        if self.config.surface is not None and len(still.depth_images) >= MIN_FRAMES:
+            self.surface = surface.learn_surface(self.camera, new, self.R_c0, self.t_c0,
+                                                 still.depth_images, self.config.surface)
         self._obs = {}  # observation and compiled constants hold the layout and W0
         self._compiled, self._compiled_usable = None, None
         self._track_id += 1
@@ -267,9 +274,29 @@ class Tracker:
                                   getattr(self.model, "angular_velocity", None)))
 
     def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
-        """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof)."""
+        """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof). The
+        markers' update, then the skin's (NIS and dof are the markers')."""
         out = self._compiled_frame(det, track, dt)
-        return self._generic_frame(det, track, dt) if out is None else out
+        if out is None:
+            out = self._generic_frame(det, track, dt)
+        settings = self.config.surface
+        if (getattr(self, "surface", None) is None or settings is None or not self.config.use_depth
+                or det.depth is None or det.depth_image is None or not out[3]):
+            return out
+        if getattr(self, "_pixel_rays", None) is None:
+            self._pixel_rays = surface.pixel_rays(self.camera)
+        x, P = out[0], out[1]
+        R_rel, p = self.model.pose(x[None])
+        reading = surface.read_patches(self.camera, self.surface, self.R_c0 @ R_rel[0],
+                                       self.R_c0 @ p[0] + self.t_c0, det.depth_image, settings,
+                                       self._pixel_rays)
+        if reading is None:
+            return out
+        limit = _nis_limit(settings.nis_quantile, len(reading.depth))
+        x, P, _, _ = surface.surface_update(self.model, x, P, self.R_c0, self.t_c0, self.surface,
+                                            reading, self.config.measurement, settings,
+                                            self.camera, self.config.ukf, limit)
+        return (x, P, *out[2:])
 
     def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
         """``out``, or a consistent re-association assuming a manoeuvre (see TrackerConfig)."""

@@ -1,0 +1,241 @@
+"""The back of the hand as a depth measurement: patches of skin between the markers.
+
+Under a structured-light camera the out-of-plane angles are set by depth, and six markers give
+six depth readings, each with the sensor's full noise: the noise is correlated over the ~9x9 px
+matching window, as large as a marker's image, so a marker's pixels do not average it down. The
+skin between the markers is read by the same sensor, ~25 matching windows of it at arm's
+length. Each patch of skin (radius ``radius``, centres ``spacing`` apart, about one matching
+window, so that their noises are nearly independent) is a depth measurement of the hand's pose:
+
+- Learned over the still start (:func:`learn_surface`): the still frames' depth pixels, put
+  into the hand frame by W0 (the hand's pose over the still start), give each patch a local
+  plane (centre point and normal, hand frame; the normal fitted over the patch's
+  neighbourhood). The hand's own shape is learned, not assumed: a
+  real back of the hand arches over the knuckles.
+- Read every tracked frame (:func:`read_patches`): the pixels within a patch's image disc, each
+  carried along the patch's plane to its centre's ray (the plane's depth there plus the pixel's
+  residual from the plane), are gated (a finger, the background, a marker) and averaged with
+  their tails trimmed.
+- Used as a second unscented update after the markers' (:func:`surface_update`): the measured
+  depth of each centre ray against where the ray meets the patch's plane at each sigma point
+  (:func:`plane_depths`). Noise: the sensor's axial noise, the skin's own shape error and the
+  colour-depth misregistration, which the patches share as the markers do.
+
+Off the still start (the paper model) or without a depth image there is no surface update.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from wristtrack.camera import Camera
+from wristtrack.filter import ukf
+from wristtrack.hand import HandLayout
+from wristtrack.tracking.observation import MeasurementNoise, registration_depth_jacobian
+
+_TRIM = 0.1  # fraction of a patch's residuals cut off each tail before averaging
+
+
+@dataclass(frozen=True)
+class SurfaceSettings:
+    """How the back of the hand is cut into depth patches and trusted."""
+
+    spacing: float = 0.012  # m between patch centres: about a matching window at arm's length
+    radius: float = 0.005  # m, patch radius
+    clearance: float = 0.010  # m from any marker centre: a 12 mm marker and its rim
+    shape_sigma: float = 0.0005  # m: the skin's own movement and the local plane's misfit
+    gate: float = 0.008  # m: a pixel further off the patch's plane is something else
+    min_valid: float = 0.5  # fraction of a patch's pixels that must read and pass the gate
+    min_points: int = 30  # pixels per patch over the still start to learn its plane
+    grazing_cos: float = 0.3  # a patch seen more obliquely than this is not read
+    nis_quantile: float = 0.999  # an update beyond this chi-square quantile is not applied
+
+
+@dataclass(frozen=True)
+class DorsumSurface:
+    """Local planes of the back of the hand: centres and unit normals (K, 3), hand frame; the
+    normals point along the hand frame's +Z, towards a camera that sees the markers."""
+
+    points: np.ndarray
+    normals: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+@dataclass(frozen=True)
+class PatchReading:
+    """One frame's readings: which patches (indices), their centre rays (K, 3) with z = 1, and
+    the measured depth (m) along each."""
+
+    patches: np.ndarray
+    rays: np.ndarray
+    depth: np.ndarray
+
+
+def plane_depths(points: np.ndarray, normals: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """Depth (z) at which each ray (..., 3), z = 1, meets the plane through ``points`` with
+    ``normals`` (camera frame, broadcast against the rays): (n . p) / (n . r)."""
+    return np.einsum("...j,...j->...", normals, points) / np.einsum("...j,...j->...", normals,
+                                                                      rays)
+
+
+def patch_centres(layout: HandLayout, settings: SurfaceSettings) -> np.ndarray:
+    """(K, 2) hand-frame X, Y of the patch centres: a grid over the markers' hull, clear of the
+    markers."""
+    xy = layout.points[:, :2]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    gx = np.arange(lo[0], hi[0] + 1e-9, settings.spacing)
+    gy = np.arange(lo[1], hi[1] + 1e-9, settings.spacing)
+    grid = np.column_stack([a.ravel() for a in np.meshgrid(gx, gy)])
+    grid = grid[Delaunay(xy).find_simplex(grid) >= 0]
+    clear = np.linalg.norm(grid[:, None] - xy[None], axis=2).min(axis=1) > settings.clearance
+    return grid[clear]
+
+
+def learn_surface(camera: Camera, layout: HandLayout, R_ch: np.ndarray, t_ch: np.ndarray,
+                  depths: list[np.ndarray], settings: SurfaceSettings) -> DorsumSurface | None:
+    """The back of the hand's local planes from depth frames (raw, registered to colour) of a
+    hand held still at pose (R_ch, t_ch); None where no patch has enough pixels."""
+    if not depths:
+        return None
+    H, W = depths[0].shape
+    corners = camera.project(layout.points @ R_ch.T + t_ch)
+    if not np.isfinite(corners).all():
+        return None
+    margin = camera.fx * (settings.radius + settings.spacing) / max(float(t_ch[2]), 1e-3)
+    u0, v0 = np.maximum(np.floor(corners.min(axis=0) - margin).astype(int), 0)
+    u1, v1 = np.minimum(np.ceil(corners.max(axis=0) + margin).astype(int) + 1, (W, H))
+    if u1 <= u0 or v1 <= v0:
+        return None
+    vv, uu = np.mgrid[v0:v1, u0:u1]
+    rays = np.concatenate((camera.normalize(np.stack((uu, vv), axis=-1).reshape(-1, 2)),
+                           np.ones(((v1 - v0) * (u1 - u0), 1))), axis=1)
+    pts = []
+    for frame in depths:
+        z = frame[v0:v1, u0:u1].reshape(-1) * camera.depth_scale
+        ok = z > 0
+        pts.append((rays[ok] * z[ok, None] - t_ch) @ R_ch)  # into the hand frame
+    hand = np.concatenate(pts)
+    # the skin lies within a few mm of the markers' plane; the rest is fingers and background
+    hand = hand[np.abs(hand[:, 2] - np.median(layout.points[:, 2])) < 2 * settings.gate]
+    centres, normals = [], []
+    for c in patch_centres(layout, settings):
+        q = hand - np.append(c, 0.0)
+        gap = np.linalg.norm(q[:, :2], axis=1)
+        # the height from the patch itself, the normal from its neighbourhood: a 5 mm disc's
+        # slope would carry a few degrees of the sensor's noise
+        here = _plane_fit(q[gap < settings.radius], settings.min_points)
+        around = _plane_fit(q[gap < settings.spacing], settings.min_points)
+        if here is not None and around is not None:
+            centres.append((c[0], c[1], here[0]))
+            normals.append(around[1])
+    if not centres:
+        return None
+    return DorsumSurface(np.array(centres), np.array(normals))
+
+
+def _plane_fit(q: np.ndarray, min_points: int) -> tuple[float, np.ndarray] | None:
+    """Height at the origin and unit normal (+Z) of the plane z = a + b x + c y through points
+    ``q`` (n, 3), refitted twice without the points beyond 3 robust sigmas."""
+    for _ in range(3):
+        if len(q) < min_points:
+            return None
+        A = np.column_stack((np.ones(len(q)), q[:, 0], q[:, 1]))
+        coef = np.linalg.lstsq(A, q[:, 2], rcond=None)[0]
+        r = q[:, 2] - A @ coef
+        spread = 1.4826 * np.median(np.abs(r))
+        q = q[np.abs(r) <= max(3.0 * spread, 1e-4)]
+    normal = np.array([-coef[1], -coef[2], 1.0])
+    return float(coef[0]), normal / np.linalg.norm(normal)
+
+
+def pixel_rays(camera: Camera) -> np.ndarray:
+    """(H, W, 2) undistorted normalised coordinates of every pixel: looked up, not undistorted
+    anew (iteratively, with lens distortion) for each patch's pixels in every frame."""
+    v, u = np.mgrid[0:camera.height, 0:camera.width]
+    return camera.normalize(np.stack((u, v), axis=-1).astype(np.float64))
+
+
+def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch: np.ndarray,
+                 depth: np.ndarray, settings: SurfaceSettings,
+                 rays_xy: np.ndarray | None = None) -> PatchReading | None:
+    """The depth of each visible patch's centre ray in the raw depth frame ``depth`` (registered
+    to colour), with the hand at (R_ch, t_ch); None where no patch can be read. ``rays_xy`` is
+    :func:`pixel_rays` of the camera (computed here when not given)."""
+    if rays_xy is None:
+        rays_xy = pixel_rays(camera)
+    P = surface.points @ R_ch.T + t_ch
+    N = surface.normals @ R_ch.T
+    dist = np.linalg.norm(P, axis=1)
+    # the back of the hand faces the camera (as tracker._expected_markers asks of the markers)
+    facing = -np.einsum("kj,kj->k", N, P) / dist > settings.grazing_cos
+    uv = camera.project(P)
+    ok = facing & (P[:, 2] > 0) & np.isfinite(uv).all(axis=1)
+    if not ok.any():
+        return None
+    index = np.flatnonzero(ok)
+    P, N, uv = P[ok], N[ok], uv[ok]
+    r_px = camera.fx * settings.radius / P[:, 2]
+    half = int(np.ceil(r_px.max()))
+    off = np.arange(-half, half + 1)
+    du, dv = np.meshgrid(off, off)
+    pu = np.rint(uv[:, 0])[:, None] + du.ravel()  # (K, w*w) pixel columns and rows
+    pv = np.rint(uv[:, 1])[:, None] + dv.ravel()
+    H, W = depth.shape
+    inside = ((pu - uv[:, :1]) ** 2 + (pv - uv[:, 1:]) ** 2 <= r_px[:, None] ** 2) \
+        & (pu >= 0) & (pu < W) & (pv >= 0) & (pv < H)
+    iv, iu = np.clip(pv, 0, H - 1).astype(int), np.clip(pu, 0, W - 1).astype(int)
+    z = depth[iv, iu] * camera.depth_scale
+    rays = np.concatenate((rays_xy[iv, iu], np.ones((*pu.shape, 1))), axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = z - plane_depths(P[:, None], N[:, None], rays)
+    good = inside & (z > 0) & (np.abs(e) < settings.gate)
+    n = good.sum(axis=1)
+    read = (n >= settings.min_valid * inside.sum(axis=1)) & (n > 0)
+    if not read.any():
+        return None
+    # trimmed mean of each patch's residuals: sort with the rejected ones last
+    e = np.sort(np.where(good, e, np.inf), axis=1)[read]
+    n = n[read]
+    lo = np.floor(_TRIM * n).astype(int)
+    hi = np.maximum(np.ceil((1 - _TRIM) * n).astype(int), lo + 1)
+    csum = np.concatenate((np.zeros((len(n), 1)), np.cumsum(np.where(np.isfinite(e), e, 0.0),
+                                                             axis=1)), axis=1)
+    rows = np.arange(len(n))
+    mean = (csum[rows, hi] - csum[rows, lo]) / (hi - lo)
+    centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
+    measured = plane_depths(P[read], N[read], centre) + mean
+    return PatchReading(index[read], centre, measured)
+
+
+def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
+                   surface: DorsumSurface, reading: PatchReading, noise: MeasurementNoise,
+                   settings: SurfaceSettings, camera: Camera, params: ukf.UKFParams,
+                   nis_limit: float) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """The unscented update of (x, P) with one frame's patch readings: (x, P, NIS, dof).
+    ``noise`` is the markers' MeasurementNoise (the sensor's depth sigma and the
+    misregistration); an update whose NIS is beyond ``nis_limit`` is not applied."""
+    pts, nrm = surface.points[reading.patches], surface.normals[reading.patches]
+
+    def h(X: np.ndarray) -> np.ndarray:
+        R_rel, p = model.pose(X)
+        R_ch = R_c0 @ R_rel
+        t_ch = p @ R_c0.T + t_c0
+        Pw = np.einsum("sij,kj->ski", R_ch, pts) + t_ch[:, None]
+        Nw = np.einsum("sij,kj->ski", R_ch, nrm)
+        return plane_depths(Pw, Nw, reading.rays[None])
+
+    pred = ukf.predict_measurement(model, x, P, h, params)
+    R_rel, p = model.pose(x[None])
+    R_ch = R_c0 @ R_rel[0]
+    Pc, Nc = pts @ R_ch.T + (R_c0 @ p[0] + t_c0), nrm @ R_ch.T
+    G = registration_depth_jacobian(Pc, Nc, noise.registration_px, camera.fx, camera.fy)
+    R = np.diag(noise.depth_sigma(reading.depth) ** 2 + settings.shape_sigma ** 2) + G @ G.T
+    res = ukf.update(model, x, P, pred, reading.depth, R)
+    if not res.nis <= nis_limit:
+        return x, P, res.nis, res.dof
+    return res.x, res.P, res.nis, res.dof
