@@ -16,18 +16,25 @@ def positive_int(text: str) -> int:
 
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
-    """--model, --association and --no-depth, read back by :func:`tracker_config`."""
+    """--model, --association, --no-depth and --no-skin-depth, read back by
+    :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
+    parser.add_argument(
+        "--no-skin-depth", action="store_true",
+        help="use the markers' depth only, not the skin between them (e.g. a gloved or bandaged "
+             "hand whose surface moves against the markers)")
 
 
 def tracker_config(args: argparse.Namespace):
     """The TrackerConfig the options of :func:`add_tracker_options` ask for."""
+    from wristtrack.tracking.surface import SurfaceSettings
     from wristtrack.tracking.tracker import TrackerConfig
 
     if args.model in ("paper", "paper_rpy"):
         return TrackerConfig.paper(model=args.model)
-    return TrackerConfig(association=args.association, use_depth=not args.no_depth)
+    return TrackerConfig(association=args.association, use_depth=not args.no_depth,
+                         surface=None if args.no_skin_depth else SurfaceSettings())
 
 
