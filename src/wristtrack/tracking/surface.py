@@ -27,6 +27,7 @@ Off the still start (the paper model) or without a depth image there is no surfa
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.spatial import Delaunay
@@ -49,7 +50,7 @@ class SurfaceSettings:
     shape_sigma: float = 0.0005  # m: the skin's own movement and the local plane's misfit
     gate: float = 0.008  # m: a pixel further off the patch's plane is something else
     min_valid: float = 0.5  # fraction of a patch's pixels that must read and pass the gate
-    min_points: int = 30  # pixels per patch over the still start to learn its plane
+    min_points: int = 12  # pixels (averaged over the still start) to learn a patch's plane
     grazing_cos: float = 0.3  # a patch seen more obliquely than this is not read
     nis_quantile: float = 0.999  # an update beyond this chi-square quantile is not applied
 
@@ -96,6 +97,18 @@ def patch_centres(layout: HandLayout, settings: SurfaceSettings) -> np.ndarray:
     return grid[clear]
 
 
+@lru_cache(maxsize=4)
+def pixel_rays(camera: Camera) -> np.ndarray:
+    """(H, W, 2) undistorted normalised coordinates of every pixel (read-only, one table per
+    camera): looked up, not undistorted anew (iteratively, with lens distortion) for each
+    patch's pixels in every frame. Building it takes 30-200 ms: the tracker does so when it is
+    made, not in the middle of a live recording."""
+    v, u = np.mgrid[0:camera.height, 0:camera.width]
+    table = camera.normalize(np.stack((u, v), axis=-1).astype(np.float64))
+    table.setflags(write=False)
+    return table
+
+
 def learn_surface(camera: Camera, layout: HandLayout, R_ch: np.ndarray, t_ch: np.ndarray,
                   depths: list[np.ndarray], settings: SurfaceSettings) -> DorsumSurface | None:
     """The back of the hand's local planes from depth frames (raw, registered to colour) of a
@@ -111,15 +124,17 @@ def learn_surface(camera: Camera, layout: HandLayout, R_ch: np.ndarray, t_ch: np
     u1, v1 = np.minimum(np.ceil(corners.max(axis=0) + margin).astype(int) + 1, (W, H))
     if u1 <= u0 or v1 <= v0:
         return None
-    vv, uu = np.mgrid[v0:v1, u0:u1]
-    rays = np.concatenate((camera.normalize(np.stack((uu, vv), axis=-1).reshape(-1, 2)),
-                           np.ones(((v1 - v0) * (u1 - u0), 1))), axis=1)
-    pts = []
-    for frame in depths:
-        z = frame[v0:v1, u0:u1].reshape(-1) * camera.depth_scale
-        ok = z > 0
-        pts.append((rays[ok] * z[ok, None] - t_ch) @ R_ch)  # into the hand frame
-    hand = np.concatenate(pts)
+    # The hand is still over these frames (W0 is one pose for all of them): average each
+    # pixel's readings, then fit the planes to one frame's worth of points.
+    stack = np.stack([frame[v0:v1, u0:u1] for frame in depths]).astype(np.float64)
+    n = (stack > 0).sum(axis=0)
+    z = stack.sum(axis=0) / np.maximum(n, 1) * camera.depth_scale
+    ok = n >= 0.5 * len(depths)
+    if not ok.any():
+        return None
+    rays = np.concatenate((pixel_rays(camera)[v0:v1, u0:u1][ok], np.ones((int(ok.sum()), 1))),
+                          axis=1)
+    hand = (rays * z[ok, None] - t_ch) @ R_ch  # into the hand frame
     # the skin lies within a few mm of the markers' plane; the rest is fingers and background
     hand = hand[np.abs(hand[:, 2] - np.median(layout.points[:, 2])) < 2 * settings.gate]
     centres, normals = [], []
@@ -151,13 +166,6 @@ def _plane_fit(q: np.ndarray, min_points: int) -> tuple[float, np.ndarray] | Non
         q = q[np.abs(r) <= max(3.0 * spread, 1e-4)]
     normal = np.array([-coef[1], -coef[2], 1.0])
     return float(coef[0]), normal / np.linalg.norm(normal)
-
-
-def pixel_rays(camera: Camera) -> np.ndarray:
-    """(H, W, 2) undistorted normalised coordinates of every pixel: looked up, not undistorted
-    anew (iteratively, with lens distortion) for each patch's pixels in every frame."""
-    v, u = np.mgrid[0:camera.height, 0:camera.width]
-    return camera.normalize(np.stack((u, v), axis=-1).astype(np.float64))
 
 
 def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch: np.ndarray,

@@ -9,7 +9,9 @@ The fixed frame W0 is the hand frame of the first initialisation, refined once a
 the still start that follows it (tracking/neutral.py: W0 fitted to all the still frames, and
 without hand.json the layout averaged over them); it never moves afterwards.
 
-Each tracking frame is one filter step: predict, associate, update. The generic path
+Each tracking frame is one filter step: predict, associate, update; then, once the still start
+has taught it the shape of the skin between the markers, a second update with that skin's depth
+(tracking/surface.py). The generic path
 (``Tracker._generic_frame``) is the reference and reads like the paper; for the default
 configuration the same step runs as one compiled call (tracking/compiled.py, numba) where numba
 loads, and the generic path takes every other configuration and every frame the compiled step
@@ -83,7 +85,8 @@ class Tracker:
         self.w0_cov = np.zeros((6, 6))
         # the skin between the markers, learned over the still start (tracking/surface.py)
         self.surface: surface.DorsumSurface | None = None
-        self._pixel_rays: np.ndarray | None = None  # surface.pixel_rays, on first use
+        if self.config.surface is not None and self.config.use_depth:
+            surface.pixel_rays(self.camera)  # its table built now, not in mid-recording
         # results' track_id: a new one at every initialisation and where the still start moves
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
         # never smooths across the change of frame
@@ -98,7 +101,6 @@ class Tracker:
         loads it again on its next frame."""
         state = self.__dict__.copy()
         state["_compiled"] = state["_compiled_usable"] = None
-        state["_pixel_rays"] = None  # a lookup table, rebuilt on first use
         return state
 
     # ------------------------------------------------------------------------------- stepping
@@ -275,28 +277,30 @@ class Tracker:
 
     def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
         """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof). The
-        markers' update, then the skin's (NIS and dof are the markers')."""
+        markers' update, then the skin's where it is known (NIS and dof are the markers')."""
         out = self._compiled_frame(det, track, dt)
         if out is None:
             out = self._generic_frame(det, track, dt)
-        settings = self.config.surface
-        if (getattr(self, "surface", None) is None or settings is None or not self.config.use_depth
-                or det.depth is None or det.depth_image is None or not out[3]):
+        if self.surface is None or not self.config.use_depth or det.depth is None \
+                or det.depth_image is None or not out[3]:
             return out
-        if getattr(self, "_pixel_rays", None) is None:
-            self._pixel_rays = surface.pixel_rays(self.camera)
-        x, P = out[0], out[1]
+        return (*self._skin_update(out[0], out[1], det.depth_image), *out[2:])
+
+    def _skin_update(self, x: np.ndarray, P: np.ndarray, depth_image: np.ndarray) -> tuple:
+        """(x, P) updated with the depth of the skin between the markers (tracking/surface.py),
+        read at the pose the markers gave; unchanged where no patch can be read."""
+        settings = self.config.surface
         R_rel, p = self.model.pose(x[None])
         reading = surface.read_patches(self.camera, self.surface, self.R_c0 @ R_rel[0],
-                                       self.R_c0 @ p[0] + self.t_c0, det.depth_image, settings,
-                                       self._pixel_rays)
+                                       self.R_c0 @ p[0] + self.t_c0, depth_image, settings,
+                                       surface.pixel_rays(self.camera))
         if reading is None:
-            return out
+            return x, P
         limit = _nis_limit(settings.nis_quantile, len(reading.depth))
         x, P, _, _ = surface.surface_update(self.model, x, P, self.R_c0, self.t_c0, self.surface,
                                             reading, self.config.measurement, settings,
                                             self.camera, self.config.ukf, limit)
-        return (x, P, *out[2:])
+        return x, P
 
     def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
         """``out``, or a consistent re-association assuming a manoeuvre (see TrackerConfig)."""
