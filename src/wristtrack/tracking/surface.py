@@ -7,11 +7,11 @@ skin between the markers is read by the same sensor, ~25 matching windows of it 
 length. Each patch of skin (radius ``radius``, centres ``spacing`` apart, about one matching
 window, so that their noises are nearly independent) is a depth measurement of the hand's pose:
 
-- Learned over the still start (:func:`learn_surface`): the still frames' depth pixels, put
-  into the hand frame by W0 (the hand's pose over the still start), give each patch a local
-  plane (centre point and normal, hand frame; the normal fitted over the patch's
-  neighbourhood). The hand's own shape is learned, not assumed: a
-  real back of the hand arches over the knuckles.
+- Learned over the still start (:func:`learn_surface`): the still frames' depth, averaged per
+  pixel and put into the hand frame by W0 (the hand's pose over the still start), gives each
+  patch a local plane (centre point and normal, hand frame; the normal fitted over the patch's
+  neighbourhood). The hand's own shape is learned, not assumed: a real back of the hand arches
+  over the knuckles.
 - Read every tracked frame (:func:`read_patches`): the pixels within a patch's image disc, each
   carried along the patch's plane to its centre's ray (the plane's depth there plus the pixel's
   residual from the plane), are gated (a finger, the background, a marker) and averaged with
