@@ -69,12 +69,15 @@ class DorsumSurface:
 
 @dataclass(frozen=True)
 class PatchReading:
-    """One frame's readings: which patches (indices), their centre rays (K, 3) with z = 1, and
-    the measured depth (m) along each."""
+    """One frame's readings: which patches (indices), their centre rays (K, 3) with z = 1, the
+    measured depth (m) along each, and the patches' centres and normals (K, 3) in the camera
+    frame at the pose they were read at."""
 
     patches: np.ndarray
     rays: np.ndarray
     depth: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray
 
 
 def plane_depths(points: np.ndarray, normals: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -217,16 +220,16 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     mean = (csum[rows, hi] - csum[rows, lo]) / (hi - lo)
     centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
     measured = plane_depths(P[read], N[read], centre) + mean
-    return PatchReading(index[read], centre, measured)
+    return PatchReading(index[read], centre, measured, P[read], N[read])
 
 
 def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
                    surface: DorsumSurface, reading: PatchReading, noise: MeasurementNoise,
                    settings: SurfaceSettings, camera: Camera, params: ukf.UKFParams,
                    nis_limit: float) -> tuple[np.ndarray, np.ndarray, float, int]:
-    """The unscented update of (x, P) with one frame's patch readings: (x, P, NIS, dof).
-    ``noise`` is the markers' MeasurementNoise (the sensor's depth sigma and the
-    misregistration); an update whose NIS is beyond ``nis_limit`` is not applied."""
+    """The unscented update of (x, P) with one frame's patch readings, read at the pose of x:
+    (x, P, NIS, dof). ``noise`` is the markers' MeasurementNoise (the sensor's depth sigma and
+    the misregistration); an update whose NIS is beyond ``nis_limit`` is not applied."""
     pts, nrm = surface.points[reading.patches], surface.normals[reading.patches]
 
     def h(X: np.ndarray) -> np.ndarray:
@@ -238,10 +241,8 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
         return plane_depths(Pw, Nw, reading.rays[None])
 
     pred = ukf.predict_measurement(model, x, P, h, params)
-    R_rel, p = model.pose(x[None])
-    R_ch = R_c0 @ R_rel[0]
-    Pc, Nc = pts @ R_ch.T + (R_c0 @ p[0] + t_c0), nrm @ R_ch.T
-    G = registration_depth_jacobian(Pc, Nc, noise.registration_px, camera.fx, camera.fy)
+    G = registration_depth_jacobian(reading.points, reading.normals, noise.registration_px,
+                                    camera.fx, camera.fy)
     R = np.diag(noise.depth_sigma(reading.depth) ** 2 + settings.shape_sigma ** 2) + G @ G.T
     res = ukf.update(model, x, P, pred, reading.depth, R)
     if not res.nis <= nis_limit:
