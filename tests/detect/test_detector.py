@@ -227,6 +227,33 @@ def test_clipped_marker_is_flagged():
     assert not any(det.last_blobs[k].suspect for k in j[[0, 2, 3, 4, 5]])
 
 
+def test_a_specular_highlight_on_the_rim_does_not_pull_the_centre():
+    """The lamp mirrored on a glossy marker (white added, saturating) at its rim, as
+    sim/renderer.py draws it: read along white it is a bite out of the marker."""
+    s = synth_scene(3, centre=(300.0, 250.0), tilt_deg=15.0, noise=2.0)
+    bgr = s.bgr.astype(np.float32)
+    blue = (bgr[..., 0] - bgr[..., 2]) > 60  # marker pixels (skin is redder than blue)
+    errors = {}
+    for excess in (np.inf, DetectorConfig().highlight_excess):
+        det = MarkerDetector(s.camera, DetectorConfig(highlight_excess=excess))
+        err = []
+        for k, (u, v) in enumerate(s.uv):
+            # a 1.2 px spot, peak 230 grey levels, two thirds of the way to the rim
+            direction = np.array([np.cos(k), np.sin(k)])
+            cu, cv_ = np.array([u, v]) + 0.65 * 6.0 * direction
+            yy, xx = np.mgrid[0 : bgr.shape[0], 0 : bgr.shape[1]]
+            spot = 230.0 * np.exp(-0.5 * ((xx - cu) ** 2 + (yy - cv_) ** 2) / 1.2**2)
+            lit = bgr + (spot * blue)[..., None]
+            d = det.detect(np.clip(lit, 0, 255).astype(np.uint8), s.depth, 0.0)
+            _, dist = match(s.uv[k : k + 1], d.uv)
+            err.append(dist[0])
+        errors[excess] = np.array(err)
+    plain, discounted = errors[np.inf], errors[DetectorConfig().highlight_excess]
+    assert plain.mean() > 0.2, errors  # the bite is real without the discount
+    # halved; what is left is the channel the highlight saturated
+    assert discounted.mean() < 0.5 * plain.mean() and discounted.max() < 0.2, errors
+
+
 def coverage(size: int, centre, axes, angle_deg: float, cut_x: float = np.inf) -> np.ndarray:
     """Exact-area rendering (8x supersampled) of a filled ellipse, optionally cut at x > cut_x."""
     S = 8

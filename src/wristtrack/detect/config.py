@@ -68,6 +68,7 @@ class DetectorConfig:
     blur_margin: int = 1  # half-res pixels beyond a blob's box that may still carry its colour
     mixed_background: float = 0.15  # background colour spread / marker contrast above which
     # the background is unmixed as two surfaces (blob on the hand's edge, at an occluder)
+    highlight_excess: float = 40.0  # grey levels above the marker-skin line: a specular spot
     min_contrast: float = 10.0  # marker vs background colour distance (levels) below: no blob
     max_candidates: int = 24  # per frame, largest first: bounds the per-blob work
     depth_size_tolerance: float = 0.2  # blob's own depth used for its expected size if within

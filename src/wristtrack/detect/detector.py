@@ -41,6 +41,7 @@ from wristtrack.detect.blobs import (
     DEPTH_CORE,
     Shapes,
     blueness,
+    discount_highlights,
     gather,
     shapes,
     split_pair,
@@ -372,6 +373,7 @@ class MarkerDetector(MarkerLearning):
                                                 m[mixed], b[mixed])
             # (only the support is used below: the rest of each window is zeroed)
             t[mixed[ok]] = u[ok]
+        t = discount_highlights(t, patch, m, b, cfg.highlight_excess)
         # weights only inside the support, off other blobs; scaled so the bluest pixel is 1
         t *= upsample2(box & (free | core))
         peak = t.reshape(len(t), -1).max(1)
