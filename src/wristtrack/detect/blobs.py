@@ -150,20 +150,22 @@ def shapes(w: np.ndarray) -> Shapes:
     return Shapes(*out)
 
 
-def blueness(patch: np.ndarray, m: np.ndarray, b: np.ndarray) -> np.ndarray:
+def blueness(patch: np.ndarray, m: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """t = (p - b).(m - b) / |m - b|^2 for a stack of BGR windows (n, sy, sx, 3) and per-window
-    marker and background colours (n, 3); float32 (n, sy, sx)."""
+    marker and background colours (n, 3), and each pixel's brightness B + G + R (for
+    :func:`discount_highlights`, from the same product); both float32 (n, sy, sx)."""
     d = m - b
     g = d / np.maximum((d * d).sum(1), 1e-9)[:, None]
     n, sy, sx, _ = patch.shape
-    t = patch.reshape(n, -1, 3).astype(np.float32) @ g[:, :, None].astype(np.float32)
-    t = t.reshape(n, sy, sx)
-    t -= (b * g).sum(1).astype(np.float32)[:, None, None]
-    return t
+    G = np.ones((n, 3, 2), np.float32)
+    G[:, :, 0] = g
+    tb = patch.reshape(n, -1, 3).astype(np.float32) @ G
+    t = tb[:, :, 0].reshape(n, sy, sx) - (b * g).sum(1).astype(np.float32)[:, None, None]
+    return t, tb[:, :, 1].reshape(n, sy, sx)
 
 
-def discount_highlights(t: np.ndarray, patch: np.ndarray, m: np.ndarray, b: np.ndarray,
-                        min_excess: float) -> np.ndarray:
+def discount_highlights(t: np.ndarray, brightness: np.ndarray, patch: np.ndarray, m: np.ndarray,
+                        b: np.ndarray, min_excess: float) -> np.ndarray:
     """Blueness (n, sy, sx) with the markers' specular highlights discounted.
 
     A glossy marker mirrors the lamp: by the dichromatic reflection model its pixels add the
@@ -178,9 +180,9 @@ def discount_highlights(t: np.ndarray, patch: np.ndarray, m: np.ndarray, b: np.n
     d = (m - b).astype(np.float32)
     bf = b.astype(np.float32)
     total = d.sum(1)
-    excess = (patch.sum(3, dtype=np.float32) - bf.sum(1)[:, None, None]
-              - t * total[:, None, None]) / np.float32(math.sqrt(3.0))
-    hot = excess > min_excess
+    # brightness along white beyond the b-m mix of the pixel's blueness, in grey levels
+    limit = bf.sum(1) + np.float32(min_excess * math.sqrt(3.0))
+    hot = brightness - t * total[:, None, None] > limit[:, None, None]
     if not hot.any():
         return t
     chroma = d - total[:, None] / 3  # m - b without its white component

@@ -364,7 +364,7 @@ class MarkerDetector(MarkerLearning):
         # full resolution
         gy, gx = 2 * (hy0 + wy0), 2 * (hx0 + wx0)
         patch = gather(bgr, gy, gx, (2 * sy, 2 * sx))
-        t = blueness(patch, m, b)
+        t, brightness = blueness(patch, m, b)
         mixed = np.flatnonzero(keep & (spread > cfg.mixed_background * contrast))
         if mixed.size:
             # each mixed blob's support (its box) unmixed against two background colours
@@ -373,7 +373,7 @@ class MarkerDetector(MarkerLearning):
                                                 m[mixed], b[mixed])
             # (only the support is used below: the rest of each window is zeroed)
             t[mixed[ok]] = u[ok]
-        t = discount_highlights(t, patch, m, b, cfg.highlight_excess)
+        t = discount_highlights(t, brightness, patch, m, b, cfg.highlight_excess)
         # weights only inside the support, off other blobs; scaled so the bluest pixel is 1
         t *= upsample2(box & (free | core))
         peak = t.reshape(len(t), -1).max(1)
