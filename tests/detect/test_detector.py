@@ -254,6 +254,23 @@ def test_a_specular_highlight_on_the_rim_does_not_pull_the_centre():
     assert discounted.mean() < 0.5 * plain.mean() and discounted.max() < 0.2, errors
 
 
+def test_a_white_table_beside_a_marker_on_the_hands_edge_is_no_highlight():
+    """Brighter than skin and, against the skin's colour, a little blue: with the table a
+    white sheet, the disc on the hand's edge stays where the plain blueness puts it."""
+    for seed in (5, 6):
+        s = synth_scene(seed, centre=(300.0, 250.0))
+        bgr = s.bgr.copy()
+        bgr[~s.hand] = 225
+        centres = []
+        for excess in (np.inf, DetectorConfig().highlight_excess):
+            det = MarkerDetector(s.camera, DetectorConfig(highlight_excess=excess))
+            d = det.detect(bgr, s.depth, 0.0)
+            j, dist = match(s.edge_clutter_uv, d.uv)
+            assert dist[0] < 3.0
+            centres.append(d.uv[j[0]])
+        assert np.linalg.norm(centres[0] - centres[1]) < 0.02, centres
+
+
 def coverage(size: int, centre, axes, angle_deg: float, cut_x: float = np.inf) -> np.ndarray:
     """Exact-area rendering (8x supersampled) of a filled ellipse, optionally cut at x > cut_x."""
     S = 8

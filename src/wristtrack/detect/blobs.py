@@ -261,8 +261,9 @@ def split_pair(w: np.ndarray, cx: float, cy: float, angle: float, waist_ratio: f
     return u < cut, u >= cut
 
 
-def unmix_two_backgrounds_stack(patch: np.ndarray, ring_px: np.ndarray, ring: np.ndarray,
-                                m: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def unmix_two_backgrounds_stack(
+    patch: np.ndarray, ring_px: np.ndarray, ring: np.ndarray, m: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Coverage of the marker colour at each pixel of blob windows whose background is two
     surfaces (hand edge, occluder edge), for a stack of blobs at once.
 
@@ -273,8 +274,9 @@ def unmix_two_backgrounds_stack(patch: np.ndarray, ring_px: np.ndarray, ring: np
     ``patch`` (n, sy, sx, 3) BGR windows; ``ring_px`` (n, P, 3) float64 colours of the
     background samples' windows and ``ring`` (n, P) bool which of them are ring pixels (at
     least one each); ``m``, ``b`` (n, 3) marker colours and ring means. Returns the coverage
-    (n, sy, sx) float32 and (n,) bool: False where a ring does not split into two parts of 3
-    samples or more (there :func:`blueness` against ``b`` applies, the coverage is undefined).
+    (n, sy, sx) float32; (n,) bool: False where a ring does not split into two parts of 3
+    samples or more (there :func:`blueness` against ``b`` applies, the coverage is undefined);
+    the two background colours (n, 2, 3); and (n, sy, sx) bool: the pixel took the first.
     """
     n, sy, sx, _ = patch.shape
     proj = ((ring_px - b[:, None, :]) @ (m - b)[:, :, None])[:, :, 0]
@@ -298,5 +300,7 @@ def unmix_two_backgrounds_stack(patch: np.ndarray, ring_px: np.ndarray, ring: np
     a1 = prod[:, 1] - gb[:, 1:]
     r0 = off[:, :1] - 2 * prod[:, 2] - a0 * a0 * dd[:, :1]
     r1 = off[:, 1:] - 2 * prod[:, 3] - a1 * a1 * dd[:, 1:]
-    best = np.where(r0 <= r1, a0, a1)
-    return np.maximum(best, 0).astype(np.float32).reshape(n, sy, sx), ok
+    first = r0 <= r1
+    best = np.where(first, a0, a1)
+    return (np.maximum(best, 0).astype(np.float32).reshape(n, sy, sx), ok, bg,
+            first.reshape(n, sy, sx))

@@ -365,15 +365,20 @@ class MarkerDetector(MarkerLearning):
         gy, gx = 2 * (hy0 + wy0), 2 * (hx0 + wx0)
         patch = gather(bgr, gy, gx, (2 * sy, 2 * sx))
         t, brightness = blueness(patch, m, b)
+        t = discount_highlights(t, brightness, patch, m, b, cfg.highlight_excess)
         mixed = np.flatnonzero(keep & (spread > cfg.mixed_background * contrast))
         if mixed.size:
             # each mixed blob's support (its box) unmixed against two background colours
-            u, ok = unmix_two_backgrounds_stack(patch[mixed], hp[mixed],
-                                                ring[mixed].reshape(len(mixed), -1),
-                                                m[mixed], b[mixed])
+            pm = patch[mixed]
+            u, ok, bg, first = unmix_two_backgrounds_stack(
+                pm, hp[mixed], ring[mixed].reshape(len(mixed), -1), m[mixed], b[mixed])
+            # highlights judged against the background each pixel was unmixed from: against
+            # the ring's mean, a white table by the hand's edge would pass for one
+            u = np.where(first, *(discount_highlights(u, brightness[mixed], pm, m[mixed],
+                                                      bg[:, k], cfg.highlight_excess)
+                                  for k in (0, 1)))
             # (only the support is used below: the rest of each window is zeroed)
             t[mixed[ok]] = u[ok]
-        t = discount_highlights(t, brightness, patch, m, b, cfg.highlight_excess)
         # weights only inside the support, off other blobs; scaled so the bluest pixel is 1
         t *= upsample2(box & (free | core))
         peak = t.reshape(len(t), -1).max(1)
