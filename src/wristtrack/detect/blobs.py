@@ -11,7 +11,9 @@ covers in between. The weighted centroid is then the centroid of the marker's tr
 free of the half-pixel steps of a thresholded mask. Weights are not clipped, so noise stays
 zero-mean on the background; they are scaled so the bluest pixel is 1 (sum = area in pixels).
 Where the background is two surfaces (a marker on the hand's edge: skin and table; a marker at
-an occluder's edge) each pixel is unmixed against the one that explains its colour better.
+an occluder's edge) each pixel is unmixed against the one that explains its colour better. A
+glossy marker's highlight (white added to the marker's colour) is read along the part of the
+colour axis that white does not change (:func:`discount_highlights`).
 
 Shape. From the weighted moments: the moment-equivalent ellipse (full axes 4 sigma), and a
 skewness, the square root of Mardia's multivariate skewness (root sum of squares of the third
