@@ -32,6 +32,7 @@ import numpy as np
 from wristtrack.detect.detections import Detections
 from wristtrack.filter import ukf
 from wristtrack.tracking.initialise import FLIP_LOG_EVIDENCE, InitResult
+from wristtrack.tracking.observation import hand_in_camera
 from wristtrack.tracking.pose_fit import DISTINCT_DEG, better_colour_fit
 from wristtrack.tracking.results import FrameResult
 
@@ -232,8 +233,7 @@ def colour_refit(tracker: Any, det: Detections, x: np.ndarray,
     uv = np.full((tracker.layout.points.shape[0], 2), np.nan)
     uv[labels[blobs]] = det.uv[blobs]
     R_rel, p = tracker.model.pose(x[None])
-    R_ch = tracker.R_c0 @ R_rel[0]
-    t_ch = tracker.R_c0 @ p[0] + tracker.t_c0
+    R_ch, t_ch = hand_in_camera(R_rel[0], p[0], tracker.R_c0, tracker.t_c0)
     fit = better_colour_fit(uv, tracker.camera, tracker.layout, R_ch, t_ch,
                             tracker.config.measurement.pixel_sigma, FLIP_LOG_EVIDENCE)
     if fit is None:

@@ -76,6 +76,14 @@ class MeasurementNoise:
                            self.depth_z0)
 
 
+def hand_in_camera(R_rel: np.ndarray, p: np.ndarray, R_c0: np.ndarray,
+                   t_c0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The hand's camera-frame pose (R_ch, t_ch) from its pose (R_rel, p) relative to W0 =
+    (R_c0, t_c0): R_ch = R_c0 R_rel, t_ch = R_c0 p + t_c0; single ((3, 3), (3,)) or stacked
+    ((S, 3, 3), (S, 3))."""
+    return R_c0 @ R_rel, p @ R_c0.T + t_c0
+
+
 class MarkerObservation:
     """Maps states (S, D) to stacked marker measurements (S, 6*k), marker-major, k = 2 or 3."""
 
@@ -104,9 +112,7 @@ class MarkerObservation:
 
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""
-        R_rel, p = self.pose(X)
-        R_ch = self.R_c0 @ R_rel
-        t_ch = p @ self.R_c0.T + self.t_c0
+        R_ch, t_ch = hand_in_camera(*self.pose(X), self.R_c0, self.t_c0)
         return (R_ch @ self.layout_T).swapaxes(1, 2) + t_ch[:, None, :]
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
@@ -154,8 +160,8 @@ class MarkerObservation:
     def _hand_in_camera(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The hand's camera-frame rotation (3, 3) and marker centres (6, 3) at state x (D,)."""
         R_rel, p = self.pose(x[None])
-        R_ch = self.R_c0 @ R_rel[0]
-        return R_ch, self.layout_T.T @ R_ch.T + (self.R_c0 @ p[0] + self.t_c0)
+        R_ch, t_ch = hand_in_camera(R_rel[0], p[0], self.R_c0, self.t_c0)
+        return R_ch, self.layout_T.T @ R_ch.T + t_ch
 
     def _slide_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
         G = np.zeros((self.n_markers, self.k, 3))

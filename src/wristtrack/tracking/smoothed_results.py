@@ -14,6 +14,7 @@ import numpy as np
 from wristtrack.filter.smoother import rts_smooth
 from wristtrack.filter.ukf import ManifoldModel, UKFParams
 from wristtrack.geometry import relative_pose, so3_log
+from wristtrack.tracking.observation import hand_in_camera
 from wristtrack.tracking.results import FrameResult
 
 _DEFAULT_PARAMS = UKFParams()
@@ -70,7 +71,7 @@ def smooth_results(
                 )
             R_prev = R
             var = Ps_s[j].diagonal()
-            R_ch, t_ch = R_c0 @ R, R_c0 @ p + t_c0
+            R_ch, t_ch = hand_in_camera(R, p, R_c0, t_c0)
             R_out, p_out = relative_pose(R_rep, t_rep, R_ch, t_ch)
             out[i] = replace(
                 results[i],

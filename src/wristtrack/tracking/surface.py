@@ -35,7 +35,11 @@ from scipy.spatial import Delaunay
 from wristtrack.camera import Camera
 from wristtrack.filter import ukf
 from wristtrack.hand import HandLayout
-from wristtrack.tracking.observation import MeasurementNoise, registration_depth_jacobian
+from wristtrack.tracking.observation import (
+    MeasurementNoise,
+    hand_in_camera,
+    registration_depth_jacobian,
+)
 
 _TRIM = 0.1  # fraction of a patch's residuals cut off each tail before averaging
 
@@ -233,9 +237,7 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
     pts, nrm = surface.points[reading.patches], surface.normals[reading.patches]
 
     def h(X: np.ndarray) -> np.ndarray:
-        R_rel, p = model.pose(X)
-        R_ch = R_c0 @ R_rel
-        t_ch = p @ R_c0.T + t_c0
+        R_ch, t_ch = hand_in_camera(*model.pose(X), R_c0, t_c0)
         Pw = np.einsum("sij,kj->ski", R_ch, pts) + t_ch[:, None]
         Nw = np.einsum("sij,kj->ski", R_ch, nrm)
         return plane_depths(Pw, Nw, reading.rays[None])

@@ -39,7 +39,7 @@ from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
-from wristtrack.tracking.observation import MarkerObservation, markers_on_blobs
+from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
 from wristtrack.tracking.results import FrameResult, Status
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
@@ -291,9 +291,9 @@ class Tracker:
         read at the pose the markers gave; unchanged where no patch can be read."""
         settings = self.config.surface
         R_rel, p = self.model.pose(x[None])
-        reading = surface.read_patches(self.camera, self.surface, self.R_c0 @ R_rel[0],
-                                       self.R_c0 @ p[0] + self.t_c0, depth_image, settings,
-                                       surface.pixel_rays(self.camera))
+        R_ch, t_ch = hand_in_camera(R_rel[0], p[0], self.R_c0, self.t_c0)
+        reading = surface.read_patches(self.camera, self.surface, R_ch, t_ch, depth_image,
+                                       settings, surface.pixel_rays(self.camera))
         if reading is None:
             return x, P
         limit = _nis_limit(settings.nis_quantile, len(reading.depth))
