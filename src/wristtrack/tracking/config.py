@@ -52,6 +52,11 @@ class TrackerConfig:
                 f"{', '.join(assoc.METHODS)}"
             )
 
+    @property
+    def skin_depth(self) -> bool:
+        """Whether the tracker learns the skin between the markers and reads its depth."""
+        return self.surface is not None and self.use_depth
+
     @classmethod
     def paper(cls, **kw) -> TrackerConfig:
         """The paper's method: Euler-angle state, per-blob association, depth only to initialise.

@@ -85,7 +85,7 @@ class Tracker:
         self.w0_cov = np.zeros((6, 6))
         # the skin between the markers, learned over the still start (tracking/surface.py)
         self.surface: surface.DorsumSurface | None = None
-        if self.config.surface is not None and self.config.use_depth:
+        if self.config.skin_depth:
             surface.pixel_rays(self.camera)  # its table built now, not in mid-recording
         # results' track_id: a new one at every initialisation and where the still start moves
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
@@ -203,7 +203,7 @@ class Tracker:
             track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0)
         track.R_prev = track.x[:9].reshape(3, 3)
         self.layout = new
-        if self.config.surface is not None and len(still.depth_images) >= MIN_FRAMES:
+        if self.config.skin_depth and len(still.depth_images) >= MIN_FRAMES:
             self.surface = surface.learn_surface(self.camera, new, self.R_c0, self.t_c0,
                                                  still.depth_images, self.config.surface)
         self._obs = {}  # observation and compiled constants hold the layout and W0
@@ -281,8 +281,7 @@ class Tracker:
         out = self._compiled_frame(det, track, dt)
         if out is None:
             out = self._generic_frame(det, track, dt)
-        if self.surface is None or not self.config.use_depth or det.depth is None \
-                or det.depth_image is None or not out[3]:
+        if self.surface is None or det.depth is None or det.depth_image is None or not out[3]:
             return out
         return (*self._skin_update(out[0], out[1], det.depth_image), *out[2:])
 
