@@ -20,6 +20,9 @@ class TrackerConfig:
     # every update with depth (tracking/surface.py); None: the markers' depth alone.
     surface: SurfaceSettings | None = SurfaceSettings()
     measurement: MeasurementNoise = MeasurementNoise()
+    # Scale the modelled skin slide by how much the recording shows (tracking/slide_scale.py);
+    # False: the model's slide throughout.
+    adapt_slide: bool = True
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()

@@ -45,7 +45,9 @@ class MeasurementNoise:
     independent pixel noise instead, the ~1 px slide forced a 0.7 px sigma on every marker and
     the filter threw away most of what sharp blobs say; modelled as what it is, it removes one
     pattern of the measurements (the MCPs moving together against WRIST and CMC1) and keeps the
-    rest at full weight. Zeros: a rigid hand.
+    rest at full weight. Zeros: a rigid hand. The tracker scales these sigmas by how much the
+    recording shows the skin slide (tracking/slide_scale.py): fingers that stay still have
+    none, and the slide's pattern would discount the pixels' evidence about a flexion tilt.
 
     Registration: the depth map's offset from the colour image (``registration_px`` per axis,
     the same for every marker), so each marker's depth is read off its blob, on the tilted back
@@ -105,10 +107,17 @@ class MarkerObservation:
         self.pose = pose
         self.k = 3 if use_depth else 2
         self.noise = noise
-        # (J, 3) hand-frame spread of each marker's share in the common skin slide
-        self.slide = np.zeros((self.n_markers, 3))
+        # (J, 3) hand-frame spread of each marker's share in the common skin slide: the
+        # model's (slide_base), scaled by what the recording shows (tracking/slide_scale.py)
+        self.slide_base = np.zeros((self.n_markers, 3))
         if self.n_markers == len(MARKER_NAMES):
-            self.slide[list(SLIDING_MARKERS)] = noise.skin_slide
+            self.slide_base[list(SLIDING_MARKERS)] = noise.skin_slide
+        self.slide = self.slide_base.copy()
+
+    def scale_slide(self, sd_factor: float) -> None:
+        """Take the skin slide's sigmas as ``sd_factor`` times the model's (in place: the
+        compiled step's constants share this array)."""
+        np.multiply(self.slide_base, sd_factor, out=self.slide)
 
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""
@@ -218,3 +227,12 @@ def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, 
     rows = (markers[:, None] * k + np.arange(2)).ravel()
     R = obs.noise_covariance(x, y)[np.ix_(rows, rows)]
     return float(r @ np.linalg.solve(R, r)) <= limit
+
+
+def stacked_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Measurement rows and values of the associated blobs (a blob's NaN depth is left out)."""
+    blobs = np.flatnonzero(labels >= 0)
+    rows = labels[blobs, None] * k + np.arange(k)
+    values = z[blobs]
+    ok = np.isfinite(values)
+    return rows[ok], values[ok]

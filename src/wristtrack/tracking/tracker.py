@@ -11,11 +11,12 @@ without hand.json the layout averaged over them); it never moves afterwards.
 
 Each tracking frame is one filter step: predict, associate, update; then, once the still start
 has taught it the shape of the skin between the markers, a second update with that skin's depth
-(tracking/surface.py). The generic path
-(``Tracker._generic_frame``) is the reference and reads like the paper; for the default
-configuration the same step runs as one compiled call (tracking/compiled.py, numba) where numba
-loads, and the generic path takes every other configuration and every frame the compiled step
-declines. The manoeuvre retry and the innovation-consistency (NIS) logic sit above both.
+(tracking/surface.py). The generic path (``Tracker._generic_frame``) is the reference and reads
+like the paper; for the default configuration the same step runs as one compiled call
+(tracking/compiled.py, numba) where numba loads, and the generic path takes every other
+configuration and every frame the compiled step declines. The manoeuvre retry and the
+innovation-consistency (NIS) logic sit above both; each update then tells how much the skin
+over the knuckles slides (tracking/slide_scale.py).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose
-from wristtrack.tracking import compiled, hypotheses, surface
+from wristtrack.tracking import compiled, hypotheses, observation, slide_scale, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
@@ -91,6 +92,8 @@ class Tracker:
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
         # never smooths across the change of frame
         self._track_id = -1
+        # how much the skin over the knuckles slides in this recording (tracking/slide_scale)
+        self._slide = slide_scale.SlideScale()
         # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
         self._flip: hypotheses.PlanarHypotheses | None = None
         self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
@@ -216,7 +219,20 @@ class Tracker:
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
                 use_depth, self.config.measurement,
             )
+            self._obs[use_depth].scale_slide(self._slide_state().sd_factor)
         return self._obs[use_depth]
+
+    def _slide_state(self) -> slide_scale.SlideScale:  # (setdefault: checkpoints before it)
+        return self.__dict__.setdefault("_slide", slide_scale.SlideScale())
+
+    def _adapt_slide(self, det: Detections, x, P, labels: np.ndarray, dt: float) -> None:
+        """The skin slide's scale followed from this frame's update (tracking/slide_scale)."""
+        scale = self._slide_state()
+        obs = self._observation(self.config.use_depth and det.depth is not None)
+        if self.config.adapt_slide and scale.update(slide_scale.frame_scores(
+                self.model, obs, x, P, labels, det, self.config.ukf, scale.factor), dt):
+            for o in self._obs.values():  # the compiled step's constants share their arrays
+                o.scale_slide(scale.sd_factor)
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg = self.config
@@ -252,6 +268,7 @@ class Tracker:
                 self._lose()  # the estimate no longer explains the markers: start again
                 return self._empty(det, Status.LOST)
         track.x, track.P, track.timestamp = x, P, det.timestamp
+        self._adapt_slide(det, x, P, labels, dt)
         if self._still is not None and self._still.add(det, labels, *self.model.velocities(x),
                                                        *self._velocity_covariances(P)):
             self._end_still_start(track)
@@ -385,7 +402,7 @@ class Tracker:
                 local = assoc.associate_paper(llr, self.assoc_params)
             labels = np.full(det.count, assoc.CLUTTER)
             labels[local >= 0] = marker_ids[local[local >= 0]]
-            rows, values = _stack_rows(labels, z, k)
+            rows, values = observation.stacked_rows(labels, z, k)
             if rows.size:
                 res = ukf.update(model, x, P, pred, values, R[np.ix_(rows, rows)], rows=rows)
                 x, P, nis, dof = res.x, res.P, res.nis, res.dof
@@ -429,11 +446,8 @@ class Tracker:
         R_rel, p = R_rel[0], p[0]
         v, w = self.model.velocities(track.x)
         if math.isnan(w[0]):  # the paper's state has no rate (all NaN): differentiate R
-            w = (
-                so3_log(R_rel @ track.R_prev.T) / dt
-                if dt and track.R_prev is not None
-                else np.zeros(3)
-            )
+            ok = dt and track.R_prev is not None
+            w = so3_log(R_rel @ track.R_prev.T) / dt if ok else np.zeros(3)
         track.R_prev = R_rel
         R_ch = self.R_c0.dot(R_rel)
         t_ch = self.R_c0.dot(p) + self.t_c0
@@ -484,12 +498,3 @@ def _diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
     """The n diagonal (k, k) blocks of A (n*k, n*k) as an (n, k, k) array."""
     idx = np.arange(n)[:, None] * k + np.arange(k)
     return A[idx[:, :, None], idx[:, None, :]]
-
-
-def _stack_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Measurement rows and values of the associated blobs (a blob's NaN depth is left out)."""
-    blobs = np.flatnonzero(labels >= 0)
-    rows = labels[blobs, None] * k + np.arange(k)
-    values = z[blobs]
-    ok = np.isfinite(values)
-    return rows[ok], values[ok]
