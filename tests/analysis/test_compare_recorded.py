@@ -92,9 +92,11 @@ def test_round_trip_recovers_offset_transform_and_the_evaluate_errors(trips, tmp
     ang, mm = _transform_errors(r, planted, constant)
     assert ang <= 0.1 and mm <= 0.5
     assert r["rot_rmse_deg"] == pytest.approx(net, rel=0.05)
-    # and likewise the constant part of our position error (the registration's translation)
+    # and likewise the constant part of our position error (the registration's translation);
+    # the registration's rotation takes ~0.01 mm more or less than constant offsets alone, 5 %
+    # of these 0.2 mm errors
     assert r["pos_rmse_mm"] == pytest.approx(
-        _pos_rmse_net_of_constant_offsets(run, rec, hand_frame=False), rel=0.05)
+        _pos_rmse_net_of_constant_offsets(run, rec, hand_frame=False), rel=0.05, abs=0.015)
     assert r["pos_rmse_mm"] <= ev["position_rmse_mm"] * 1.05
     assert r["rot_rmse_deg"] <= ev["orientation_rmse_deg"] * 1.05
     assert r["frames_compared"] == ev["frames_compared"]
