@@ -57,17 +57,26 @@ def test_the_factor_settles_where_the_innovations_were_drawn(true_factor):
     for _ in range(6000):
         nu = L @ rng.normal(size=m)
         Si = np.linalg.inv(A + scale.factor * B)
-        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B))), 1 / 30)
+        assert scale.due(0.3)
+        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B))))
     expected = max(true_factor, SD_FACTOR_RANGE[0] ** 2)
     assert scale.factor == pytest.approx(expected, rel=0.1, abs=0.003)
 
 
 def test_scores_that_say_nothing_change_nothing():
     scale = SlideScale()
-    assert not scale.update(None, 0.03)
-    assert not scale.update((np.nan, 1.0), 0.03)
-    assert not scale.update((0.5, 0.0), 0.03)
+    assert not scale.update(None)
+    assert not scale.update((np.nan, 1.0))
+    assert not scale.update((0.5, 0.0))
     assert scale.factor == 1.0
+
+
+def test_frames_are_scored_at_most_once_an_interval():
+    scale = SlideScale(interval=0.25)
+    assert scale.due(1 / 30)  # the first frame
+    scale.update((3.0, 1.0))
+    due = [scale.due(1 / 30) for _ in range(16)]
+    assert due.index(True) == 7  # 8 frames of 1/30 s: 0.267 s
 
 
 def _rigid_frames(name: str, seed: int):

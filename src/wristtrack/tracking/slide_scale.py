@@ -45,6 +45,10 @@ PRIOR_WEIGHT = 3.0
 # ruled out) to twice it.
 SD_FACTOR_RANGE = (0.1, 2.0)
 MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide from the pose
+# Frames scored: at most one per this interval. Scoring costs about ten compiled tracker steps
+# (an unscented transform and the noise model in NumPy), and the slide changes over a flexion
+# cycle of seconds, not from frame to frame.
+SCORE_INTERVAL_S = 0.25
 
 
 def slide_scores(
@@ -89,19 +93,28 @@ class SlideScale:
     ``sd_factor`` scales the slide's sigmas."""
 
     time_constant: float = TIME_CONSTANT_S
+    interval: float = SCORE_INTERVAL_S
     factor: float = 1.0
     _num: float = field(default=PRIOR_WEIGHT)
     _den: float = field(default=PRIOR_WEIGHT)
+    _since: float = math.inf  # s since the last frame scored
 
     @property
     def sd_factor(self) -> float:
         return math.sqrt(self.factor)
 
-    def update(self, scores: tuple[float, float] | None, dt: float) -> bool:
-        """Fold in one update's scores (at the model's sigma); whether the factor changed."""
+    def due(self, dt: float) -> bool:
+        """Whether the frame ``dt`` after the last one is to be scored."""
+        self._since += max(dt, 0.0)
+        return self._since >= self.interval
+
+    def update(self, scores: tuple[float, float] | None) -> bool:
+        """Fold in one scored frame's scores (at the model's sigma); whether the factor
+        changed."""
         if scores is None or not (np.isfinite(scores).all() and scores[1] > 0):
             return False
-        keep = math.exp(-max(dt, 0.0) / self.time_constant)
+        keep = math.exp(-self._since / self.time_constant) if math.isfinite(self._since) else 1.0
+        self._since = 0.0
         # the fixed point of lambda * num / den, each frame's numerator taken at its lambda
         self._num = keep * self._num + self.factor * scores[0]
         self._den = keep * self._den + scores[1]

@@ -229,8 +229,8 @@ class Tracker:
         """The skin slide's scale followed from this frame's update (tracking/slide_scale)."""
         scale = self._slide_state()
         obs = self._observation(self.config.use_depth and det.depth is not None)
-        if self.config.adapt_slide and scale.update(slide_scale.frame_scores(
-                self.model, obs, x, P, labels, det, self.config.ukf, scale.factor), dt):
+        if self.config.adapt_slide and scale.due(dt) and scale.update(slide_scale.frame_scores(
+                self.model, obs, x, P, labels, det, self.config.ukf, scale.factor)):
             for o in self._obs.values():  # the compiled step's constants share their arrays
                 o.scale_slide(scale.sd_factor)
 
