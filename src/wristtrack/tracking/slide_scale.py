@@ -5,9 +5,9 @@ metacarpal heads when the fingers flex (tracking/observation.py). A hand whose f
 still has none, and then the modelled slide costs accuracy: its pattern, the four MCP markers
 shifted together along the hand, is also what a flexion tilt does to their pixels, so the filter
 discounts the pixels' evidence about that tilt. On the rendered recordings without finger
-movement the fixed model cost 0.32 -> 0.30 deg with depth, 0.54 -> 0.48 deg under
-structured-light depth and 0.77 -> 0.59 deg on colour alone (where per-frame PnP, which models
-no slide, had beaten the filter).
+movement the fixed model cost 0.30 against 0.28 deg (clean), 0.61 against 0.56 (structured-light
+depth) and 0.77 against 0.63 on colour alone, where per-frame PnP, which models no slide, had
+beaten the filter (docs/BENCHMARKS.md).
 
 So the slide's covariance is scaled by a factor (on the variance) estimated from the recording:
 variance-component estimation. For an innovation nu ~ N(0, S), S = A + lambda B with B the
@@ -21,10 +21,12 @@ climbs it (the EM step for a variance component). The sums forget old frames (ti
 computed from the update's posterior, which the tracker keeps (the compiled step returns nothing
 else): with R the measurement noise, e = y - h(x+) the posterior residual and P+ the posterior,
 S^-1 nu = R^-1 e and S^-1 = R^-1 - R^-1 H P+ H^T R^-1 (Woodbury), exact for a linear update.
+(The posterior is the frame's, after the skin's depth update too: a little tighter than the
+markers' alone, which lowers the factor a little.)
 
 The slide moves slowly, so the prior has already followed part of it and the estimate comes out
-below the slide's white-noise equivalent (0.55-0.7 of the model's sigma on the rendered
-soft-tissue recordings, whose slide is the model's); that cost those recordings 0-4 %.
+below the slide's white-noise equivalent (0.55-0.8 of the model's sigma on the rendered
+soft-tissue recordings, whose slide is the model's): 0.33 against 0.34 deg there.
 """
 
 from __future__ import annotations
@@ -109,8 +111,8 @@ class SlideScale:
         return self._since >= self.interval
 
     def update(self, scores: tuple[float, float] | None) -> bool:
-        """Fold in one scored frame's scores (at the model's sigma); whether the factor
-        changed."""
+        """Fold in one scored frame's scores (at the model's sigma); whether they were taken
+        (None, non-finite or uninformative scores are not, and the frame stays due)."""
         if scores is None or not (np.isfinite(scores).all() and scores[1] > 0):
             return False
         keep = math.exp(-self._since / self.time_constant) if math.isfinite(self._since) else 1.0
