@@ -26,7 +26,7 @@ markers' alone, which lowers the factor a little.)
 
 The slide moves slowly, so the prior has already followed part of it and the estimate comes out
 below the slide's white-noise equivalent (0.55-0.8 of the model's sigma on the rendered
-soft-tissue recordings, whose slide is the model's): 0.33 against 0.34 deg there.
+soft-tissue recordings, whose slide is the model's): 0.34 deg there, 0.33 with the model's.
 """
 
 from __future__ import annotations
