@@ -449,8 +449,7 @@ class Tracker:
             ok = dt and track.R_prev is not None
             w = so3_log(R_rel @ track.R_prev.T) / dt if ok else np.zeros(3)
         track.R_prev = R_rel
-        R_ch = self.R_c0.dot(R_rel)
-        t_ch = self.R_c0.dot(p) + self.t_c0
+        R_ch, t_ch = hand_in_camera(R_rel, p, self.R_c0, self.t_c0)
         if n_clutter is None:
             n_clutter = int(np.sum(labels < 0))
         var = track.P.diagonal()
