@@ -20,9 +20,10 @@ class TrackerConfig:
     # every update with depth (tracking/surface.py); None: the markers' depth alone.
     surface: SurfaceSettings | None = SurfaceSettings()
     measurement: MeasurementNoise = MeasurementNoise()
-    # Scale the modelled skin slide by how much the recording shows (tracking/slide_scale.py);
-    # False: the model's slide throughout.
+    # Scale the modelled skin slide by how much the recording shows, and take the blobs' pixel
+    # noise from it (tracking/noise_scale.py, pixel_noise.py); False: the model's throughout.
     adapt_slide: bool = True
+    adapt_pixel: bool = True
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
@@ -66,14 +67,15 @@ class TrackerConfig:
 
         No innovation-consistency loss: the paper has none (and its filter is not consistent).
         No noise shared between markers (skin slide, misregistration): the paper models its
-        blobs as independent, at the 0.7 px our own filter used before it modelled them. No
-        depth of the skin between the markers.
+        blobs as independent, at the 0.7 px our own filter used before it modelled them, fixed.
+        No depth of the skin between the markers.
         """
         kw.setdefault("measurement", MeasurementNoise(pixel_sigma=0.7, skin_slide=(0.0, 0.0, 0.0),
                                                       registration_px=0.0))
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
+        kw.setdefault("adapt_pixel", False)
         kw.setdefault("surface", None)
         kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles
         return cls(association="paper", use_depth=False, **kw)

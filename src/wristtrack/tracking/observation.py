@@ -10,7 +10,7 @@ out-of-plane angles.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -118,6 +118,10 @@ class MarkerObservation:
         """Take the skin slide's sigmas as ``sd_factor`` times the model's (in place: the
         compiled step's constants share this array)."""
         np.multiply(self.slide_base, sd_factor, out=self.slide)
+
+    def set_pixel_sigma(self, sigma: float) -> None:
+        """Take the blobs' pixel noise as ``sigma`` (px) from now on (tracking/pixel_noise.py)."""
+        self.noise = replace(self.noise, pixel_sigma=sigma)
 
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""

@@ -16,7 +16,7 @@ like the paper; for the default configuration the same step runs as one compiled
 (tracking/compiled.py, numba) where numba loads, and the generic path takes every other
 configuration and every frame the compiled step declines. The manoeuvre retry and the
 innovation-consistency (NIS) logic sit above both; each update then tells how much the skin
-over the knuckles slides (tracking/slide_scale.py).
+over the knuckles slides and how sharp the blobs are (tracking/noise_scale.py).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose
-from wristtrack.tracking import compiled, hypotheses, observation, slide_scale, surface
+from wristtrack.tracking import compiled, hypotheses, noise_scale, observation, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
@@ -92,8 +92,8 @@ class Tracker:
         # W0, so a consumer that treats one track_id as one continuous state (the RTS smoother)
         # never smooths across the change of frame
         self._track_id = -1
-        # how much the skin over the knuckles slides in this recording (tracking/slide_scale)
-        self._slide = slide_scale.SlideScale()
+        # the skin slide and the blobs' noise in this recording (tracking/noise_scale)
+        self._noise = noise_scale.LearnedNoise()
         # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
         self._flip: hypotheses.PlanarHypotheses | None = None
         self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
@@ -219,20 +219,21 @@ class Tracker:
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
                 use_depth, self.config.measurement,
             )
-            self._obs[use_depth].scale_slide(self._slide_state().sd_factor)
+            self._learned_noise().apply(self._obs[use_depth])
         return self._obs[use_depth]
 
-    def _slide_state(self) -> slide_scale.SlideScale:  # (setdefault: checkpoints before it)
-        return self.__dict__.setdefault("_slide", slide_scale.SlideScale())
+    def _learned_noise(self) -> noise_scale.LearnedNoise:  # (setdefault: older checkpoints)
+        return self.__dict__.setdefault("_noise", noise_scale.LearnedNoise())
 
-    def _adapt_slide(self, det: Detections, x, P, labels: np.ndarray, dt: float) -> None:
-        """The skin slide's scale followed from this frame's update (tracking/slide_scale)."""
-        scale = self._slide_state()
-        obs = self._observation(self.config.use_depth and det.depth is not None)
-        if self.config.adapt_slide and scale.due(dt) and scale.update(slide_scale.frame_scores(
-                self.model, obs, x, P, labels, det, self.config.ukf, scale.factor)):
-            for o in self._obs.values():  # the compiled step's constants share their arrays
-                o.scale_slide(scale.sd_factor)
+    def _learn_noise(self, det: Detections, x, P, labels: np.ndarray, dt: float) -> None:
+        """The skin slide and the blobs' pixel noise followed (tracking/noise_scale.py)."""
+        cfg, learned = self.config, self._learned_noise()
+        obs = self._observation(cfg.use_depth and det.depth is not None)
+        if learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf, cfg.measurement,
+                          cfg.adapt_slide, cfg.adapt_pixel):
+            for o in self._obs.values():
+                learned.apply(o)
+            self._compiled_usable = None  # the compiled step's constants made again
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg = self.config
@@ -268,7 +269,7 @@ class Tracker:
                 self._lose()  # the estimate no longer explains the markers: start again
                 return self._empty(det, Status.LOST)
         track.x, track.P, track.timestamp = x, P, det.timestamp
-        self._adapt_slide(det, x, P, labels, dt)
+        self._learn_noise(det, x, P, labels, dt)
         if self._still is not None and self._still.add(det, labels, *self.model.velocities(x),
                                                        *self._velocity_covariances(P)):
             self._end_still_start(track)
@@ -338,7 +339,7 @@ class Tracker:
     def _compiled_frame(self, det: Detections, track: _Track, dt: float) -> tuple | None:
         """``_generic_frame``'s result from the compiled step, or None where this configuration
         or frame is not one it takes (or it declines the frame, having changed nothing)."""
-        if self._compiled_usable is None:  # decided once: W0 and the layout are fixed by now
+        if self._compiled_usable is None:  # again when W0, the layout or the noise learned change
             cfg, obs = self.config, self._observation(True)
             self._compiled_usable = (
                 type(self.model) is ConstantRateModel

@@ -1,6 +1,7 @@
-"""The skin slide's scale learned from the recording (tracking/slide_scale.py): its scores from the
-posterior against the innovation form on a linear-Gaussian update, its fixed point against the
-variance the innovations were drawn with, and the tracker on markers that slide and that do not."""
+"""The markers' noise learned from the recording (tracking/noise_scale.py): the variance components'
+scores from the posterior against the innovation form on a linear-Gaussian update, their fixed
+point against the variance the innovations were drawn with, and the tracker on markers that slide
+and that do not (the pixel noise's own use: test_pixel_noise.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,14 @@ from wristtrack.hand import HandLayout
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import scenario
 from wristtrack.sim.scenario_run import score_run
-from wristtrack.tracking.slide_scale import SD_FACTOR_RANGE, SlideScale, slide_scores
+from wristtrack.tracking import noise_scale
+from wristtrack.tracking.noise_scale import (
+    SD_FACTOR_RANGE,
+    LearnedNoise,
+    VarianceFactor,
+    component_scores,
+)
+from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 from .test_skin_slide import _sliding_skin_frames
@@ -24,7 +32,7 @@ def _spd(rng: np.random.Generator, n: int, scale: float = 1.0) -> np.ndarray:
 
 def test_posterior_scores_equal_the_innovation_form():
     """A linear update: nu^T S^-1 B S^-1 nu and tr(S^-1 B) computed from the innovation and S
-    directly equal slide_scores of the posterior residual, R and H P+ H^T."""
+    directly equal component_scores of the posterior residual, R and H P+ H^T."""
     rng = np.random.default_rng(0)
     n, m = 6, 10
     P0, H = _spd(rng, n), rng.normal(size=(m, n))
@@ -38,9 +46,10 @@ def test_posterior_scores_equal_the_innovation_form():
     P_post = (np.eye(n) - K @ H) @ P0
     residual = nu - H @ x_post
     Si = np.linalg.inv(S)
-    num, den = slide_scores(residual, R, H @ P_post @ H.T, B)
+    num, den, curvature = component_scores(residual, R, H @ P_post @ H.T, B)
     assert num == pytest.approx(nu @ Si @ B @ Si @ nu, rel=1e-9)
     assert den == pytest.approx(np.trace(Si @ B), rel=1e-9)
+    assert curvature == pytest.approx(np.trace(Si @ B @ Si @ B), rel=1e-9)
 
 
 @pytest.mark.parametrize("true_factor", [0.3, 1.5, 0.0])
@@ -53,30 +62,56 @@ def test_the_factor_settles_where_the_innovations_were_drawn(true_factor):
     G = rng.normal(size=(m, 3)) * 0.8
     B = G @ G.T
     L = np.linalg.cholesky(A + true_factor * B)
-    scale = SlideScale(time_constant=200.0)
+    scale = VarianceFactor(time_constant=200.0)
     for _ in range(6000):
         nu = L @ rng.normal(size=m)
         Si = np.linalg.inv(A + scale.factor * B)
-        assert scale.due(0.3)
-        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B))))
+        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B)), 1.0), 0.3)
     expected = max(true_factor, SD_FACTOR_RANGE[0] ** 2)
     assert scale.factor == pytest.approx(expected, rel=0.1, abs=0.003)
 
 
+def test_a_factor_learned_at_another_value_than_the_filter_used():
+    """The filter took the component at ``used`` times its model value (the pixel sigma is
+    bounded): innovations drawn at f settle the factor at f all the same."""
+    rng = np.random.default_rng(2)
+    m = 12
+    A = _spd(rng, m, 0.2)
+    B = np.eye(m)
+    L = np.linalg.cholesky(A + 0.2 * B)
+    scale = VarianceFactor(time_constant=200.0, factor_range=(1e-3, 4.0))
+    for _ in range(6000):
+        used = max(scale.factor, 0.5)  # a floor above the truth, as SIGMA_FLOOR can be
+        nu = L @ rng.normal(size=m)
+        Si = np.linalg.inv(A + used * B)
+        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B)),
+                      float(np.trace(Si @ B @ Si @ B))), 0.03, used)
+    assert scale.factor == pytest.approx(0.2, rel=0.1)
+
+
 def test_scores_that_say_nothing_change_nothing():
-    scale = SlideScale()
-    assert not scale.update(None)
-    assert not scale.update((np.nan, 1.0))
-    assert not scale.update((0.5, 0.0))
+    scale = VarianceFactor()
+    assert not scale.update(None, 0.3)
+    assert not scale.update((np.nan, 1.0, 1.0), 0.3)
+    assert not scale.update((0.5, 0.0, 1.0), 0.3)
     assert scale.factor == 1.0
 
 
-def test_frames_are_scored_at_most_once_an_interval():
-    scale = SlideScale(interval=0.25)
-    assert scale.due(1 / 30)  # the first frame
-    scale.update((3.0, 1.0))
-    due = [scale.due(1 / 30) for _ in range(16)]
-    assert due.index(True) == 7  # 8 frames of 1/30 s: 0.267 s
+def test_frames_are_scored_at_most_once_an_interval(monkeypatch):
+    """LearnedNoise scores its first frame, then the first one SCORE_INTERVAL_S after it."""
+    scored, now = [], [0]
+
+    def scores(*_):
+        scored.append(now[0])
+        return noise_scale.FrameScores(None, (3.0, 1.0, 1.0))
+
+    monkeypatch.setattr(noise_scale, "frame_scores", scores)
+    learned = LearnedNoise()
+    for frame in range(17):
+        now[0] = frame
+        learned.follow(None, None, None, None, None, None, 1 / 30, None, MeasurementNoise(),
+                       slide=True, pixel=False)
+    assert scored == [0, 8, 16]  # 8 frames of 1/30 s: 0.267 s
 
 
 def _rigid_frames(name: str, seed: int):
@@ -89,11 +124,12 @@ def _rigid_frames(name: str, seed: int):
 
 
 def _run(truth, camera, layout: HandLayout, frames, name: str, adapt: bool, depth: bool):
-    tracker = Tracker(camera, layout, TrackerConfig(adapt_slide=adapt, use_depth=depth))
+    tracker = Tracker(camera, layout, TrackerConfig(adapt_slide=adapt, adapt_pixel=False,
+                                                    use_depth=depth))
     results = [tracker.step(f.detections) for f in frames]
     run = score_run(name, truth, frames, results)
     assert run.errors.coverage == 1.0
-    return run.errors.orientation_rmse_deg, tracker._slide.sd_factor
+    return run.errors.orientation_rmse_deg, tracker._noise.slide.sd_factor
 
 
 @pytest.mark.parametrize("depth", [True, False], ids=["depth", "colour-only"])

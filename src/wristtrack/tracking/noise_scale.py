@@ -1,0 +1,219 @@
+"""How much noise this recording's markers carry, learned as it goes: variance components.
+
+Two parts of the measurement noise differ from recording to recording, and the fixed model
+costs accuracy wherever they are smaller than it says:
+
+- the skin slide of the MCP markers (``MeasurementNoise.skin_slide``): a hand whose fingers stay
+  still has none, and the modelled slide's pattern, the four MCP markers shifted together along
+  the hand, is also what a flexion tilt does to their pixels, so the filter discounts the pixels'
+  evidence about that tilt. On the rendered recordings without finger movement the fixed model
+  cost 0.30 against 0.28 deg (clean), 0.61 against 0.56 (structured-light depth) and 0.77
+  against 0.63 on colour alone, where per-frame PnP, which models no slide, had beaten the
+  filter (docs/BENCHMARKS.md);
+- the blobs' own pixel noise (``MeasurementNoise.pixel_sigma``), 0.3 px to cover the worst of
+  blur, compression and highlights together, where sharp blobs are good to 0.04 px
+  (tracking/pixel_noise.py says how the learned figure is used).
+
+Each is scaled by a factor (on the variance) estimated from the recording: variance-component
+estimation. For an innovation nu ~ N(0, S), S = A + lambda B with B the component at its model
+value, the likelihood is stationary in lambda where nu^T S^-1 B S^-1 nu = tr(S^-1 B); the
+fixed-point step
+
+    lambda <- lambda * sum_t nu^T S^-1 B S^-1 nu / sum_t tr(S^-1 B)
+
+climbs it (the EM step for a variance component). The sums forget old frames (time constant
+``TIME_CONSTANT_S``), so the factor follows fingers that start or stop moving. Both terms are
+computed from the update's posterior, which the tracker keeps (the compiled step returns nothing
+else): with R the measurement noise, e = y - h(x+) the posterior residual and P+ the posterior,
+S^-1 nu = R^-1 e and S^-1 = R^-1 - R^-1 H P+ H^T R^-1 (Woodbury), exact for a linear update.
+(The posterior is the frame's, after the skin's depth update too: a little tighter than the
+markers' alone, which lowers the factors a little.)
+
+The slide moves slowly, so the prior has already followed part of it and the estimate comes out
+below the slide's white-noise equivalent (0.55-0.8 of the model's sigma on the rendered
+soft-tissue recordings, whose slide is the model's): 0.34 deg there, 0.33 with the model's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from wristtrack.filter import ukf
+from wristtrack.tracking import pixel_noise
+from wristtrack.tracking.observation import MeasurementNoise, stacked_rows
+
+# Memory of the estimate: the fingers' slide changes over a flexion cycle of a few seconds.
+TIME_CONSTANT_S = 2.0
+# The model's own value counts as this much evidence (a frame gives tr(S^-1 B) of up to ~3 for
+# the slide, ~10 for the pixels of six markers).
+PRIOR_WEIGHT = 3.0
+# Guard rails on the slide's sigma, as a factor on the model's: a tenth (no slide is ever
+# ruled out) to twice it.
+SD_FACTOR_RANGE = (0.1, 2.0)
+MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide or the pixels from the pose
+# Frames scored: at most one per this interval. Scoring costs about ten compiled tracker steps
+# (an unscented transform and the noise model in NumPy), and the noise changes over seconds
+# (a flexion cycle, the light), not from frame to frame.
+SCORE_INTERVAL_S = 0.25
+
+
+class FrameScores(NamedTuple):
+    """One frame's ``component_scores`` for each component, B at its model value
+    (``VarianceFactor.update`` takes them so); ``slide`` None where no slide is modelled."""
+
+    slide: tuple[float, float, float] | None
+    pixel: tuple[float, float, float]
+
+
+def component_scores(
+    residual: np.ndarray, R: np.ndarray, HPH: np.ndarray, B: np.ndarray
+) -> tuple[float, float, float]:
+    """(nu^T S^-1 B S^-1 nu, tr(S^-1 B), tr(S^-1 B S^-1 B)) of one update from its posterior:
+    ``residual`` (m,) y - h(x+), ``R`` (m, m) the measurement noise it was updated with, ``HPH``
+    (m, m) the posterior's spread in the measurements (H P+ H^T), ``B`` (m, m) the component's
+    covariance."""
+    Ri = np.linalg.inv(R)
+    a = Ri @ residual
+    SiB = (Ri - Ri @ HPH @ Ri) @ B
+    return float(a @ B @ a), float(np.trace(SiB)), float(np.sum(SiB * SiB.T))
+
+
+def frame_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, det,
+                 params: ukf.UKFParams, slide_factor: float,
+                 model_pixel_sigma: float) -> FrameScores | None:
+    """``component_scores`` of a frame's markers update for the skin slide and the blobs' pixel
+    noise: the posterior (x, P) of state model ``model``, the MarkerObservation ``obs`` it used
+    (its slide at ``slide_factor`` times the model's variance, its pixel sigma whatever it is),
+    the blobs ``det`` labelled ``labels``; each B at its model value (the slide's, and
+    ``model_pixel_sigma``). None where the frame cannot tell: fewer than MIN_MARKERS markers, a
+    marker given several blobs (the paper's association)."""
+    taken = labels[labels >= 0]
+    if np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
+        return None
+    z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
+    rows, values = stacked_rows(labels, z, obs.k)
+    pred = ukf.predict_measurement(model, x, P, obs, params)
+    y_hat = obs(x[None])[0]
+    R = obs.noise_covariance(x, y_hat)[np.ix_(rows, rows)]
+    residual, HPH = values - y_hat[rows], pred.Pyy[np.ix_(rows, rows)]
+    pixel_rows = (rows % obs.k) < 2
+    B_pixel = np.diag(np.where(pixel_rows, model_pixel_sigma**2, 0.0))
+    try:
+        slide = None
+        if obs.slide.any():
+            G = obs.slide_jacobian(x)[rows]
+            slide = component_scores(residual, R, HPH, G @ G.T / slide_factor)
+        return FrameScores(slide, component_scores(residual, R, HPH, B_pixel))
+    except np.linalg.LinAlgError:
+        return None
+
+
+@dataclass
+class VarianceFactor:
+    """A variance component's factor on its model value, learned as the track goes (module
+    doc). ``sd_factor`` scales the component's sigmas; ``factor_range`` bounds the factor."""
+
+    time_constant: float = TIME_CONSTANT_S
+    factor_range: tuple[float, float] = tuple(f * f for f in SD_FACTOR_RANGE)
+    prior_weight: float = PRIOR_WEIGHT
+    factor: float = 1.0
+    _num: float = field(default=math.nan)
+    _den: float = field(default=math.nan)
+    _since: float = math.inf  # s since the last scores taken
+
+    def __post_init__(self) -> None:
+        if math.isnan(self._num):
+            self._num = self._den = self.prior_weight
+
+    @property
+    def sd_factor(self) -> float:
+        return math.sqrt(self.factor)
+
+    def update(self, scores: tuple[float, float, float] | None, elapsed: float,
+               used: float | None = None) -> bool:
+        """Fold in one scored frame's ``component_scores`` (B at the model value), ``elapsed`` s
+        after the previous frame scored; whether they were taken (None, non-finite or
+        uninformative scores are not). ``used``: the filter took the component at this factor,
+        not the one learned (a bound on what it takes), and a scoring step from there replaces
+        the EM step, whose fixed point is only right where the two agree:
+        lambda = u + sum (num - den) / sum tr(S^-1 B S^-1 B), the moment estimate at u."""
+        self._since += max(elapsed, 0.0)
+        if scores is None or not (np.isfinite(scores).all() and scores[1] > 0 and scores[2] > 0):
+            return False
+        keep = math.exp(-self._since / self.time_constant) if math.isfinite(self._since) else 1.0
+        self._since = 0.0
+        num, den, curvature = scores
+        if used is None:  # the fixed point of lambda * num / den, each frame's at its lambda
+            self._num = keep * self._num + self.factor * num
+            self._den = keep * self._den + den
+        else:
+            self._num = keep * self._num + used * curvature + num - den
+            self._den = keep * self._den + curvature
+        lo, hi = self.factor_range
+        self.factor = min(max(self._num / self._den, lo), hi)
+        return True
+
+
+# The blobs' per-frame pixel variance as a factor on the model's: down to (0.03 sigma)^2 and up
+# to twice the sigma (tracking/pixel_noise.py bounds what the filter takes).
+PIXEL_FACTOR_RANGE = (1e-3, 4.0)
+
+
+@dataclass
+class LearnedNoise:
+    """What the tracker learns of its markers' noise: the skin slide's factor and the blobs'
+    pixel sigma (module doc; tracking/pixel_noise.py)."""
+
+    slide: VarianceFactor = field(default_factory=VarianceFactor)
+    pixel: VarianceFactor = field(
+        default_factory=lambda: VarianceFactor(factor_range=PIXEL_FACTOR_RANGE))
+    correlation: pixel_noise.BlobCorrelation | None = None
+    pixel_sigma: float | None = None  # what the filter takes (None: the model's)
+    interval: float = SCORE_INTERVAL_S
+    _since: float = math.inf  # s since the last frame scored
+
+    def follow(self, model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, det,
+               dt: float, params: ukf.UKFParams, noise: MeasurementNoise, slide: bool,
+               pixel: bool) -> bool:
+        """Learn from one tracked frame (posterior x, P; MarkerObservation ``obs``; the blobs
+        ``det`` labelled ``labels``, ``dt`` after the last frame) with the model's ``noise``,
+        learning the slide and/or the pixel sigma; whether what the filter should take
+        changed."""
+        if pixel:
+            self._add_residuals(obs, x, labels, det.uv, dt)
+        self._since += max(dt, 0.0)
+        if self._since < self.interval or not (slide or pixel):
+            return False
+        scores = frame_scores(model, obs, x, P, labels, det, params, self.slide.factor,
+                              noise.pixel_sigma)
+        if scores is None:
+            return False  # the frame stays due
+        elapsed, self._since = self._since, 0.0
+        changed = slide and self.slide.update(scores.slide, elapsed)
+        if pixel:
+            used = (obs.noise.pixel_sigma / noise.pixel_sigma) ** 2
+            if self.pixel.update(scores.pixel, elapsed, used):
+                self.pixel_sigma = pixel_noise.filter_sigma(
+                    noise.pixel_sigma, self.pixel.factor, self.correlation.inflation)
+                changed = True
+        return changed
+
+    def apply(self, obs) -> None:
+        """Give the MarkerObservation ``obs`` the slide and the pixel sigma learned so far."""
+        obs.scale_slide(self.slide.sd_factor)
+        if self.pixel_sigma is not None:
+            obs.set_pixel_sigma(self.pixel_sigma)
+
+    def _add_residuals(self, obs, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
+                       dt: float) -> None:
+        if self.correlation is None:
+            self.correlation = pixel_noise.BlobCorrelation(obs.n_markers)
+        y = obs(x[None])[0].reshape(obs.n_markers, obs.k)[:, :2]
+        residual = np.full((obs.n_markers, 2), np.nan)
+        blobs = np.flatnonzero(labels >= 0)
+        residual[labels[blobs]] = uv[blobs] - y[labels[blobs]]
+        self.correlation.add(residual, dt)

@@ -1,0 +1,88 @@
+"""The pixel noise the filter takes for this recording's blobs.
+
+``MeasurementNoise.pixel_sigma``, 0.3 px, covers the worst of blur, compression and highlights
+together; sharp blobs are good to 0.04 px, and the filter that takes them at 0.3 px leaves most
+of what their pixels say about the out-of-plane angles to depth. Where depth is poor that costs
+most: structured-light depth at 0.56 deg against 0.28 clean (docs/BENCHMARKS.md at 1869a59), 0.43
+with the pixels taken at 0.15 px throughout.
+
+Variance-component estimation (tracking/noise_scale.py) measures the blob centres' noise frame
+by frame: 0.05 px on sharp rendered blobs (0.037 against the truth), 0.15 under H.264 (0.13).
+The filter cannot take that figure as it is: the blob errors are correlated in time (the pixel
+grid, the codec's blocks and the blur change slowly while the hand moves slowly), and the
+filter, which weighs about half a second of frames, meets them larger than one frame's noise.
+Against the truth, on the rendered recordings, the variance of half-second means of a blob's
+error is 4-6x what white noise of its per-frame spread would give. So the sigma is the
+white-noise equivalent over WINDOW_S: the per-frame variance times the inflation that windows
+of the posterior residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of
+frames for a constant), measured as the track goes (``BlobCorrelation``; 5.3-6.7 on the
+rendered recordings, against 4.2-6.3 from the truth).
+
+It is kept within ``SIGMA_FLOOR`` and the model's sigma. Below the floor the errors the
+residuals cannot show dominate: blob errors along the pose's own patterns (all blobs shifted
+alike, as JPEG's blocks do) are taken up by the pose and never show. With the sigma fixed, the
+rendered clean recordings came out at 0.30 deg at 0.1 px, 0.27 at 0.15, 0.28 at 0.3 (3 seeds).
+Above the model's, what the residuals show is mostly the layout's error (without hand.json, a
+constant per marker), which is no noise: raising the sigma for it made the every-effect
+recordings worse.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+WINDOW_S = 0.5  # the span of frames whose errors the filter weighs together
+TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
+MIN_WINDOWS = 4  # windows seen before the learned sigma is used (the model's until then)
+SIGMA_FLOOR = 0.15  # px
+
+
+class BlobCorrelation:
+    """The inflation of the blobs' error variance over WINDOW_S by its correlation in time,
+    from the markers' posterior pixel residuals (module doc)."""
+
+    def __init__(self, n_markers: int):
+        self._sum = np.zeros((n_markers, 2))  # the open window's sums of e and e^2
+        self._sum_sq = np.zeros((n_markers, 2))
+        self._elapsed = 0.0
+        self._num = self._den = 0.0  # forgetting sums of (sum_w e)^2 and sum_w e^2
+        self.windows = 0
+
+    def add(self, residual: np.ndarray, dt: float) -> None:
+        """One frame's residuals (n_markers, 2) in px, NaN for markers not measured, ``dt`` (s)
+        after the previous frame."""
+        if residual.shape != self._sum.shape:
+            return  # another layout (never within one track)
+        seen = np.isfinite(residual)
+        self._sum[seen] += residual[seen]
+        self._sum_sq[seen] += residual[seen] ** 2
+        self._elapsed += max(dt, 0.0)
+        if self._elapsed < WINDOW_S:
+            return
+        keep = math.exp(-self._elapsed / TIME_CONSTANT_S)
+        self._num = keep * self._num + float(np.sum(self._sum**2))
+        self._den = keep * self._den + float(np.sum(self._sum_sq))
+        self._sum[:] = 0.0
+        self._sum_sq[:] = 0.0
+        self._elapsed = 0.0
+        self.windows += 1
+
+    @property
+    def inflation(self) -> float | None:
+        """(sum_w e)^2 / sum_w e^2 over the windows so far (at least 1), or None before
+        MIN_WINDOWS windows."""
+        if self.windows < MIN_WINDOWS or not self._den > 0:
+            return None
+        return max(self._num / self._den, 1.0)
+
+
+def filter_sigma(model_sigma: float, frame_factor: float, inflation: float | None) -> float:
+    """The pixel sigma the filter takes: the model's ``model_sigma`` scaled by the per-frame
+    variance factor learned (``frame_factor``) and the correlation's ``inflation``, within
+    [SIGMA_FLOOR, model_sigma]; the model's while the inflation is unknown."""
+    if inflation is None:
+        return model_sigma
+    sigma = model_sigma * math.sqrt(frame_factor * inflation)
+    return min(max(sigma, min(SIGMA_FLOOR, model_sigma)), model_sigma)
