@@ -88,7 +88,7 @@ def frame_constants(
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
     # The slide is the observation's own array: the tracker rescales it in place as the
-    # recording shows how much the skin slides (tracking/slide_scale.py).
+    # recording shows how much the skin slides (tracking/noise_scale.py).
     layout, slide = np.ascontiguousarray(obs.layout_T.T), obs.slide
     R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
     return layout, slide, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par

@@ -37,7 +37,8 @@ class MeasurementNoise:
 
     Pixels: the blob centre's own noise, independent between markers. Measured on rendered
     recordings it is 0.02-0.05 px on sharp frames and 0.13-0.26 px under every realism effect at
-    once (blur, JPEG, Bayer, highlights); ``pixel_sigma`` covers the worst of it.
+    once (blur, JPEG, Bayer, highlights); ``pixel_sigma`` covers the worst of it, and the tracker
+    lowers it to what the recording's blobs show (tracking/pixel_noise.py).
 
     Skin: the MCP markers' common slide over the metacarpal heads (``skin_slide``, hand-frame
     standard deviations, ``SKIN_SLIDE_SIGMA``), a displacement shared by the four markers, so
@@ -46,7 +47,7 @@ class MeasurementNoise:
     the filter threw away most of what sharp blobs say; modelled as what it is, it removes one
     pattern of the measurements (the MCPs moving together against WRIST and CMC1) and keeps the
     rest at full weight. Zeros: a rigid hand. The tracker scales these sigmas by how much the
-    recording shows the skin slide (tracking/slide_scale.py): fingers that stay still have
+    recording shows the skin slide (tracking/noise_scale.py): fingers that stay still have
     none, and the slide's pattern would discount the pixels' evidence about a flexion tilt.
 
     Registration: the depth map's offset from the colour image (``registration_px`` per axis,
@@ -108,7 +109,7 @@ class MarkerObservation:
         self.k = 3 if use_depth else 2
         self.noise = noise
         # (J, 3) hand-frame spread of each marker's share in the common skin slide: the
-        # model's (slide_base), scaled by what the recording shows (tracking/slide_scale.py)
+        # model's (slide_base), scaled by what the recording shows (tracking/noise_scale.py)
         self.slide_base = np.zeros((self.n_markers, 3))
         if self.n_markers == len(MARKER_NAMES):
             self.slide_base[list(SLIDING_MARKERS)] = noise.skin_slide
