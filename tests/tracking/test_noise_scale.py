@@ -129,7 +129,7 @@ def _run(truth, camera, layout: HandLayout, frames, name: str, adapt: bool, dept
     results = [tracker.step(f.detections) for f in frames]
     run = score_run(name, truth, frames, results)
     assert run.errors.coverage == 1.0
-    return run.errors.orientation_rmse_deg, tracker._noise.slide.sd_factor
+    return run.errors.orientation_rmse_deg, tracker.learned_noise.slide.sd_factor
 
 
 @pytest.mark.parametrize("depth", [True, False], ids=["depth", "colour-only"])

@@ -95,7 +95,7 @@ def _run(name: str, seed: int, blob_sigma: float, adapt: bool):
     results = [tracker.step(f.detections) for f in frames]
     run = score_run(name, truth, frames, results)
     assert run.errors.coverage == 1.0
-    return run.errors.orientation_rmse_deg, tracker._noise.pixel_sigma
+    return run.errors.orientation_rmse_deg, tracker.learned_noise.pixel_sigma
 
 
 def test_sharp_blobs_are_trusted_more():

@@ -251,6 +251,8 @@ def _finish(
         skipped_frames=run.bad_frames,
         # what the tracker must say about its poses, e.g. an unresolved planar flip
         warnings=list(getattr(tracker, "warnings", [])),
+        # the markers' noise as the recording showed it (tracking/noise_scale.py)
+        measurement_noise=tracker.learned_noise.describe(config.measurement),
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),

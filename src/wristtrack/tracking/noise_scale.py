@@ -202,6 +202,18 @@ class LearnedNoise:
                 changed = True
         return changed
 
+    def describe(self, noise: MeasurementNoise) -> dict[str, float | None]:
+        """What was learned against the model's ``noise``, for summary.json: the pixel sigma
+        the filter took last and the model's, the blob errors' inflation by their correlation
+        in time (None: not measured), the skin slide's sigma as a factor on the model's."""
+        inflation = self.correlation.inflation if self.correlation is not None else None
+        return {
+            "pixel_sigma_px": self.pixel_sigma or noise.pixel_sigma,
+            "pixel_sigma_model_px": noise.pixel_sigma,
+            "blob_error_inflation": inflation,
+            "skin_slide_sd_factor": self.slide.sd_factor,
+        }
+
     def apply(self, obs) -> None:
         """Give the MarkerObservation ``obs`` the slide and the pixel sigma learned so far."""
         obs.scale_slide(self.slide.sd_factor)

@@ -93,7 +93,7 @@ class Tracker:
         # never smooths across the change of frame
         self._track_id = -1
         # the skin slide and the blobs' noise in this recording (tracking/noise_scale)
-        self._noise = noise_scale.LearnedNoise()
+        self.learned_noise = noise_scale.LearnedNoise()
         # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
         self._flip: hypotheses.PlanarHypotheses | None = None
         self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
@@ -219,15 +219,12 @@ class Tracker:
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
                 use_depth, self.config.measurement,
             )
-            self._learned_noise().apply(self._obs[use_depth])
+            self.learned_noise.apply(self._obs[use_depth])
         return self._obs[use_depth]
-
-    def _learned_noise(self) -> noise_scale.LearnedNoise:  # (setdefault: older checkpoints)
-        return self.__dict__.setdefault("_noise", noise_scale.LearnedNoise())
 
     def _learn_noise(self, det: Detections, x, P, labels: np.ndarray, dt: float) -> None:
         """The skin slide and the blobs' pixel noise followed (tracking/noise_scale.py)."""
-        cfg, learned = self.config, self._learned_noise()
+        cfg, learned = self.config, self.learned_noise
         obs = self._observation(cfg.use_depth and det.depth is not None)
         if learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf, cfg.measurement,
                           cfg.adapt_slide, cfg.adapt_pixel):
