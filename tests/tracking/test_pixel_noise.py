@@ -10,7 +10,8 @@ import pytest
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import scenario
 from wristtrack.sim.scenario_run import score_run
-from wristtrack.tracking import pixel_noise
+from wristtrack.tracking import noise_scale, pixel_noise
+from wristtrack.tracking.observation import MarkerObservation
 from wristtrack.tracking.pixel_noise import (
     MIN_WINDOWS,
     SIGMA_FLOOR,
@@ -21,13 +22,14 @@ from wristtrack.tracking.pixel_noise import (
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 DT = 1 / 30
+W = round(WINDOW_S / DT) + 1  # frames in a window: it closes once WINDOW_S has passed
 
 
 def _inflation(errors: np.ndarray) -> float | None:
-    """BlobCorrelation's inflation over errors (frames, 6, 2) at 30 fps."""
-    correlation = BlobCorrelation(6)
-    for e in errors:
-        correlation.add(e, DT)
+    """BlobCorrelation's inflation over errors (frames, 6, 2) at 30 fps, in windows of W."""
+    correlation = BlobCorrelation()
+    for start in range(0, len(errors) - W + 1, W):
+        correlation.add(errors[start:start + W], (W - 1) * DT)
     return correlation.inflation
 
 
@@ -48,31 +50,52 @@ def test_correlated_errors_are_inflated_as_their_autocorrelation_says():
     """AR(1) errors: E[(sum_w e)^2] / E[sum_w e^2] = 1 + 2 sum_k (1 - k/w) rho^k over a window
     of w frames (hand-derived)."""
     rho = 0.8
-    w = round(WINDOW_S / DT) + 1  # frames in a window: it closes once WINDOW_S has passed
-    k = np.arange(1, w)
-    expected = 1 + 2 * np.sum((1 - k / w) * rho**k)
+    k = np.arange(1, W)
+    expected = 1 + 2 * np.sum((1 - k / W) * rho**k)
     got = _inflation(_ar1(np.random.default_rng(1), rho, 3000))
     assert got == pytest.approx(expected, rel=0.15)
 
 
 def test_a_constant_error_is_inflated_by_the_frames_in_a_window():
-    w = round(WINDOW_S / DT) + 1
     errors = np.broadcast_to(np.random.default_rng(2).normal(size=(6, 2)), (300, 6, 2))
-    assert _inflation(errors) == pytest.approx(w, rel=0.01)
+    assert _inflation(errors) == pytest.approx(W, rel=0.01)
 
 
 def test_unseen_markers_and_the_first_windows():
     """Markers not measured (NaN) are left out; nothing is said before MIN_WINDOWS windows."""
-    rng = np.random.default_rng(3)
-    errors = rng.normal(size=(600, 6, 2))
+    errors = np.random.default_rng(3).normal(size=(MIN_WINDOWS * W, 6, 2))
     errors[:, 2:] = np.nan
-    correlation = BlobCorrelation(6)
-    frames_per_window = round(WINDOW_S / DT) + 1
-    for t, e in enumerate(errors):
-        correlation.add(e, DT)
-        if t < MIN_WINDOWS * frames_per_window - 1:
-            assert correlation.inflation is None
-    assert correlation.inflation == pytest.approx(1.0, abs=0.2)
+    assert _inflation(errors[:-W]) is None
+    assert _inflation(errors) == pytest.approx(1.0, abs=0.3)
+
+
+def test_the_learner_measures_windows_of_frames_as_they_come():
+    """LearnedNoise gathers the tracked frames' posterior residuals into windows of WINDOW_S
+    and starts a new window where the observation changes (W0 or the layout moved): frames at
+    30 fps with the blobs exactly where the state puts them give residuals of zero."""
+    truth, camera, layout = scenario("deviation", rng=np.random.default_rng(0))
+    tracker = Tracker(camera, layout, TrackerConfig())
+    model = tracker.model
+    obs = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
+                            model.pose, False)
+    x = model.initial_state(np.eye(3), np.zeros(3))
+    uv = obs(x[None])[0].reshape(6, 2) + 0.1  # every blob 0.1 px off in u and v
+    labels = np.arange(6)
+    learned = noise_scale.LearnedNoise()
+    for _ in range(W - 1):
+        learned._add_frame(obs, x, labels, uv, DT)
+    assert learned.correlation.windows == 0
+    learned._add_frame(obs, x, labels, uv, DT)
+    assert learned.correlation.windows == 1
+    # a constant error: the window's inflation is its number of frames
+    assert learned.correlation._num / learned.correlation._den == pytest.approx(W)
+    other = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
+                              model.pose, False)
+    for _ in range(W - 1):
+        learned._add_frame(obs, x, labels, uv, DT)
+    for _ in range(W - 1):  # the window restarts with the new observation
+        learned._add_frame(other, x, labels, uv, DT)
+    assert learned.correlation.windows == 1
 
 
 def test_the_sigma_the_filter_takes_stays_within_its_bounds():

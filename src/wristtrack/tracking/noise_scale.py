@@ -171,10 +171,15 @@ class LearnedNoise:
     slide: VarianceFactor = field(default_factory=VarianceFactor)
     pixel: VarianceFactor = field(
         default_factory=lambda: VarianceFactor(factor_range=PIXEL_FACTOR_RANGE))
-    correlation: pixel_noise.BlobCorrelation | None = None
+    correlation: pixel_noise.BlobCorrelation = field(default_factory=pixel_noise.BlobCorrelation)
     pixel_sigma: float | None = None  # what the filter takes (None: the model's)
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
+    # the open window of frames for the correlation: (x, labels, uv) each, the observation
+    # they were tracked with and the time they span
+    _window: list = field(default_factory=list)
+    _window_obs: object = None
+    _window_span: float = 0.0
 
     def follow(self, model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, det,
                dt: float, params: ukf.UKFParams, noise: MeasurementNoise, slide: bool,
@@ -184,7 +189,7 @@ class LearnedNoise:
         learning the slide and/or the pixel sigma; whether what the filter should take
         changed."""
         if pixel:
-            self._add_residuals(obs, x, labels, det.uv, dt)
+            self._add_frame(obs, x, labels, det.uv, dt)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not (slide or pixel):
             return False
@@ -206,7 +211,7 @@ class LearnedNoise:
         """What was learned against the model's ``noise``, for summary.json: the pixel sigma
         the filter took last and the model's, the blob errors' inflation by their correlation
         in time (None: not measured), the skin slide's sigma as a factor on the model's."""
-        inflation = self.correlation.inflation if self.correlation is not None else None
+        inflation = self.correlation.inflation
         return {
             "pixel_sigma_px": self.pixel_sigma or noise.pixel_sigma,
             "pixel_sigma_model_px": noise.pixel_sigma,
@@ -220,12 +225,22 @@ class LearnedNoise:
         if self.pixel_sigma is not None:
             obs.set_pixel_sigma(self.pixel_sigma)
 
-    def _add_residuals(self, obs, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
-                       dt: float) -> None:
-        if self.correlation is None:
-            self.correlation = pixel_noise.BlobCorrelation(obs.n_markers)
-        y = obs(x[None])[0].reshape(obs.n_markers, obs.k)[:, :2]
-        residual = np.full((obs.n_markers, 2), np.nan)
-        blobs = np.flatnonzero(labels >= 0)
-        residual[labels[blobs]] = uv[blobs] - y[labels[blobs]]
-        self.correlation.add(residual, dt)
+    def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
+                   dt: float) -> None:
+        """Keep one frame for the correlation; measure the window once it spans WINDOW_S. A new
+        observation (W0 or the layout changed) starts a new window."""
+        if obs is not self._window_obs:
+            self._window, self._window_obs = [], obs
+        self._window_span = self._window_span + max(dt, 0.0) if self._window else 0.0
+        self._window.append((x, labels, uv))
+        if self._window_span < pixel_noise.WINDOW_S - 1e-6:  # (15 x 1/30 s: 0.5 - 6e-17)
+            return
+        # the window's predicted pixels in one call: per frame the step stays ~1 us
+        X = np.stack([frame[0] for frame in self._window])
+        y = obs(X).reshape(len(X), obs.n_markers, obs.k)[..., :2]
+        residuals = np.full(y.shape, np.nan)
+        for i, (_, frame_labels, frame_uv) in enumerate(self._window):
+            blobs = np.flatnonzero(frame_labels >= 0)
+            residuals[i, frame_labels[blobs]] = frame_uv[blobs] - y[i, frame_labels[blobs]]
+        self.correlation.add(residuals, self._window_span)
+        self._window = []

@@ -7,7 +7,7 @@ most: structured-light depth at 0.56 deg against 0.28 clean (docs/BENCHMARKS.md 
 with the pixels taken at 0.15 px throughout.
 
 Variance-component estimation (tracking/noise_scale.py) measures the blob centres' noise frame
-by frame: 0.05 px on sharp rendered blobs (0.037 against the truth), 0.15 under H.264 (0.13).
+by frame: 0.03-0.05 px on sharp rendered blobs (0.037 against the truth), 0.14 under H.264 (0.13).
 The filter cannot take that figure as it is: the blob errors are correlated in time (the pixel
 grid, the codec's blocks and the blur change slowly while the hand moves slowly), and the
 filter, which weighs about half a second of frames, meets them larger than one frame's noise.
@@ -41,32 +41,18 @@ SIGMA_FLOOR = 0.15  # px
 
 class BlobCorrelation:
     """The inflation of the blobs' error variance over WINDOW_S by its correlation in time,
-    from the markers' posterior pixel residuals (module doc)."""
+    from the markers' posterior pixel residuals, one window of frames at a time (module doc)."""
 
-    def __init__(self, n_markers: int):
-        self._sum = np.zeros((n_markers, 2))  # the open window's sums of e and e^2
-        self._sum_sq = np.zeros((n_markers, 2))
-        self._elapsed = 0.0
+    def __init__(self) -> None:
         self._num = self._den = 0.0  # forgetting sums of (sum_w e)^2 and sum_w e^2
         self.windows = 0
 
-    def add(self, residual: np.ndarray, dt: float) -> None:
-        """One frame's residuals (n_markers, 2) in px, NaN for markers not measured, ``dt`` (s)
-        after the previous frame."""
-        if residual.shape != self._sum.shape:
-            return  # another layout (never within one track)
-        seen = np.isfinite(residual)
-        self._sum[seen] += residual[seen]
-        self._sum_sq[seen] += residual[seen] ** 2
-        self._elapsed += max(dt, 0.0)
-        if self._elapsed < WINDOW_S:
-            return
-        keep = math.exp(-self._elapsed / TIME_CONSTANT_S)
-        self._num = keep * self._num + float(np.sum(self._sum**2))
-        self._den = keep * self._den + float(np.sum(self._sum_sq))
-        self._sum[:] = 0.0
-        self._sum_sq[:] = 0.0
-        self._elapsed = 0.0
+    def add(self, residuals: np.ndarray, span: float) -> None:
+        """One window's residuals (frames, markers, 2) in px, NaN for markers not measured,
+        spanning ``span`` seconds."""
+        keep = math.exp(-span / TIME_CONSTANT_S)
+        self._num = keep * self._num + float(np.sum(np.nansum(residuals, axis=0) ** 2))
+        self._den = keep * self._den + float(np.nansum(residuals**2))
         self.windows += 1
 
     @property

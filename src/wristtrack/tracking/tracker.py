@@ -227,7 +227,7 @@ class Tracker:
         cfg, learned = self.config, self.learned_noise
         obs = self._observation(cfg.use_depth and det.depth is not None)
         if learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf, cfg.measurement,
-                          cfg.adapt_slide, cfg.adapt_pixel):
+                          cfg.adapt_slide, cfg.learns_pixel_noise):
             for o in self._obs.values():
                 learned.apply(o)
             self._compiled_usable = None  # the compiled step's constants made again
