@@ -142,7 +142,9 @@ class VarianceFactor:
         the EM step, whose fixed point is only right where the two agree:
         lambda = u + sum (num - den) / sum tr(S^-1 B S^-1 B), the moment estimate at u."""
         self._since += max(elapsed, 0.0)
-        if scores is None or not (np.isfinite(scores).all() and scores[1] > 0 and scores[2] > 0):
+        if scores is None or not (np.isfinite(scores).all() and scores[1] > 0):
+            return False
+        if used is not None and not scores[2] > 0:
             return False
         keep = math.exp(-self._since / self.time_constant) if math.isfinite(self._since) else 1.0
         self._since = 0.0
