@@ -108,6 +108,10 @@ def test_report_has_every_section_and_the_run_metadata(run):
     for value in (summary["source"], summary["software"]["version"],
                   *summary["conventions"].values()):
         assert str(value) in text.replace("&#x27;", "'"), value
+    noise = summary["measurement_noise"]  # the noise the tracker learned, in words
+    assert (f"blob centres taken at {noise['pixel_sigma_px']:.2f} px (model "
+            f"{noise['pixel_sigma_model_px']:.2f} px)") in text
+    assert f"skin slide over the knuckles at {noise['skin_slide_sd_factor']:.2f}x" in text
     # Self-contained: no external resources, nothing fetched.
     assert not re.search(r"(src|href)=\"(https?:|//|file:)", text)
     assert "@page" in text and "A4" in text and "@media print" in text

@@ -165,12 +165,25 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
                                 f"{'yes' if settings.get('use_depth') else 'no'}, detector "
                                 f"{settings.get('detector', 'default')}"
                                 f"{', RTS-smoothed' if settings.get('smoothed') else ''}"))
+    noise = summary.get("measurement_noise")
+    if noise:  # what the tracker learned of this camera's blobs and this hand's skin
+        rows.append(("Noise learned", _learned_noise(noise)))
     conventions = summary.get("conventions") or {}
     labels = {"angles": "Angle sequence and signs", "side": "Side", "neutral": "Neutral posture",
               "hand_frame": "Hand frame", "units": "Units", "velocities": "Velocities"}
     rows += [(labels.get(k, k), v) for k, v in conventions.items()]
     items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in rows)
     return f'<dl class="meta">{items}</dl>'
+
+
+def _learned_noise(noise: dict[str, Any]) -> str:
+    """summary.json's measurement_noise in words (tracking/noise_scale.py)."""
+    inflation = noise.get("blob_error_inflation")
+    correlated = (f", their errors {_fmt(inflation, 1)}x white noise over half a second"
+                  if inflation is not None else "")
+    return (f"blob centres taken at {_fmt(noise.get('pixel_sigma_px'), 2)} px (model "
+            f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){correlated}; skin slide over "
+            f"the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the model's")
 
 
 def _notes(summary: dict[str, Any], columns: dict[str, np.ndarray]) -> str:
