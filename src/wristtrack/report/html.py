@@ -179,8 +179,8 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
 def _learned_noise(noise: dict[str, Any]) -> str:
     """summary.json's measurement_noise in words (tracking/noise_scale.py)."""
     inflation = noise.get("blob_error_inflation")
-    correlated = (f", their errors {_fmt(inflation, 1)}x white noise over half a second"
-                  if inflation is not None else "")
+    correlated = (f", their errors correlated in time (half-second means {_fmt(inflation, 1)}x "
+                  "the variance of white noise's)" if inflation is not None else "")
     return (f"blob centres taken at {_fmt(noise.get('pixel_sigma_px'), 2)} px (model "
             f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){correlated}; skin slide over "
             f"the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the model's")
