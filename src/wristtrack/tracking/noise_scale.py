@@ -27,7 +27,9 @@ computed from the update's posterior, which the tracker keeps (the compiled step
 else): with R the measurement noise, e = y - h(x+) the posterior residual and P+ the posterior,
 S^-1 nu = R^-1 e and S^-1 = R^-1 - R^-1 H P+ H^T R^-1 (Woodbury), exact for a linear update.
 (The posterior is the frame's, after the skin's depth update too: a little tighter than the
-markers' alone, which lowers the factors a little.)
+markers' alone, which lowers the factors a little.) EM's fixed point is right only where the
+filter takes the value learned; the pixel sigma it takes is bounded (tracking/pixel_noise.py),
+and there a scoring step replaces it (``VarianceFactor.update``).
 
 The slide moves slowly, so the prior has already followed part of it and the estimate comes out
 below the slide's white-noise equivalent (0.55-0.8 of the model's sigma on the rendered
@@ -49,7 +51,7 @@ from wristtrack.tracking.observation import MeasurementNoise, stacked_rows
 # Memory of the estimate: the fingers' slide changes over a flexion cycle of a few seconds.
 TIME_CONSTANT_S = 2.0
 # The model's own value counts as this much evidence (a frame gives tr(S^-1 B) of up to ~3 for
-# the slide, ~10 for the pixels of six markers).
+# the slide; the pixels' scoring step weighs a frame by tr(S^-1 B S^-1 B), tens to hundreds).
 PRIOR_WEIGHT = 3.0
 # Guard rails on the slide's sigma, as a factor on the model's: a tenth (no slide is ever
 # ruled out) to twice it.
