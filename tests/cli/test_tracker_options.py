@@ -23,3 +23,12 @@ def test_the_skin_between_the_markers_is_used_unless_switched_off():
 
 def test_the_papers_method_never_reads_the_skin():
     assert parse("--model", "paper").surface is None
+
+
+def test_the_noise_is_learned_unless_fixed():
+    learned = parse()
+    assert learned.adapt_slide and learned.learns_pixel_noise
+    fixed = parse("--fixed-noise")
+    assert not fixed.adapt_slide and not fixed.learns_pixel_noise
+    assert not parse("--model", "paper").learns_pixel_noise  # the paper's 0.7 px throughout
+    assert not parse("--association", "jpda").learns_pixel_noise

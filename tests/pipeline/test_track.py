@@ -57,6 +57,14 @@ def test_track_and_evaluate_a_rendered_recording(recordings, tmp_path, capsys, c
     assert noise["blob_error_inflation"] > 1.0
 
 
+def test_fixed_noise_keeps_the_models_values(recordings, tmp_path):
+    """--fixed-noise: the model's pixel sigma and skin slide, whatever the blobs show."""
+    summary = _track(recordings["flexion"], tmp_path / "run", "--fixed-noise", "--no-report")
+    assert summary["measurement_noise"]["pixel_sigma_px"] == 0.3
+    assert summary["measurement_noise"]["skin_slide_sd_factor"] == 1.0
+    assert summary["settings"]["adapt_pixel"] is False
+
+
 def test_rgb_only_recording_is_tracked_with_the_layout_fixing_the_scale(recordings, tmp_path,
                                                                           capsys):
     rec = recordings["rgb_only"]

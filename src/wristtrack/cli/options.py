@@ -16,7 +16,7 @@ def positive_int(text: str) -> int:
 
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
-    """--model, --association, --no-depth and --no-skin-depth, read back by
+    """--model, --association, --no-depth, --no-skin-depth and --fixed-noise, read back by
     :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
@@ -25,6 +25,11 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
         "--no-skin-depth", action="store_true",
         help="use the markers' depth only, not the skin between them (e.g. a gloved or bandaged "
              "hand whose surface moves against the markers)")
+    parser.add_argument(
+        "--fixed-noise", action="store_true",
+        help="take the blobs' pixel noise and the skin slide as the model gives them instead of "
+             "learning them from the recording (every recording weighed alike; summary.json "
+             "says what was learned otherwise)")
 
 
 def tracker_config(args: argparse.Namespace):
@@ -35,6 +40,7 @@ def tracker_config(args: argparse.Namespace):
     if args.model in ("paper", "paper_rpy"):
         return TrackerConfig.paper(model=args.model)
     return TrackerConfig(association=args.association, use_depth=not args.no_depth,
-                         surface=None if args.no_skin_depth else SurfaceSettings())
+                         surface=None if args.no_skin_depth else SurfaceSettings(),
+                         adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise)
 
 
