@@ -87,9 +87,8 @@ def frame_constants(
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
-    # The slide is the observation's own array: the tracker rescales it in place as the
-    # recording shows how much the skin slides (tracking/noise_scale.py).
-    layout, slide = np.ascontiguousarray(obs.layout_T.T), obs.slide
+    # The tracker makes these again whenever the noise it learns changes (tracking/noise_scale.py)
+    layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)
     R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
     return layout, slide, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
 

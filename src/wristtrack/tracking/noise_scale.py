@@ -123,13 +123,12 @@ class VarianceFactor:
     factor_range: tuple[float, float] = tuple(f * f for f in SD_FACTOR_RANGE)
     prior_weight: float = PRIOR_WEIGHT
     factor: float = 1.0
-    _num: float = field(default=math.nan)
-    _den: float = field(default=math.nan)
+    _num: float = field(init=False)  # the forgetting sums whose ratio is the factor
+    _den: float = field(init=False)
     _since: float = math.inf  # s since the last scores taken
 
     def __post_init__(self) -> None:
-        if math.isnan(self._num):
-            self._num = self._den = self.prior_weight
+        self._num = self._den = self.prior_weight
 
     @property
     def sd_factor(self) -> float:

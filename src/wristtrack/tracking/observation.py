@@ -116,9 +116,8 @@ class MarkerObservation:
         self.slide = self.slide_base.copy()
 
     def scale_slide(self, sd_factor: float) -> None:
-        """Take the skin slide's sigmas as ``sd_factor`` times the model's (in place: the
-        compiled step's constants share this array)."""
-        np.multiply(self.slide_base, sd_factor, out=self.slide)
+        """Take the skin slide's sigmas as ``sd_factor`` times the model's."""
+        self.slide = self.slide_base * sd_factor
 
     def set_pixel_sigma(self, sigma: float) -> None:
         """Take the blobs' pixel noise as ``sigma`` (px) from now on (tracking/pixel_noise.py)."""
