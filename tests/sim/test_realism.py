@@ -406,3 +406,20 @@ def test_h264_without_pyav_is_one_clear_line_and_writes_nothing(tmp_path, monkey
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "pip install 'wristtrack[video]'" in err
     assert not out.exists()
+
+
+def test_a_marker_slid_onto_the_finger_base_shows_whole():
+    # Wrist extended, fingers flexed: the MCP markers' skin has slid ~2.5 mm distally, past their
+    # knuckles' pads onto the base of the fingers. A sticker shows wherever its skin is seen;
+    # drawn on the back of the hand alone, a tenth of each disc went missing and the blobs'
+    # centres moved ~0.5 px away from the fingers, all four alike.
+    from wristtrack.detect.detector import MarkerDetector
+
+    sc = make_scene("no_hand", 0, effects=["nonplanar", "soft_tissue"])
+    t = 4.6
+    assert realism.finger_flexion_deg(t, float(sc.times[0])) > 50
+    frame = Renderer(sc, 0).frame(t)
+    np.testing.assert_allclose(frame.visible, 1.0)
+    det = MarkerDetector(sc.camera).detect(frame.bgr, frame.depth, t)
+    for j in range(2, 6):
+        assert np.linalg.norm(det.uv - frame.uv[j], axis=1).min() < 0.15, MARKER_NAMES[j]

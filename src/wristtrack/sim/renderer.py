@@ -41,6 +41,12 @@ from wristtrack.sim.shading import (
 )
 
 _SUPERSAMPLE = 8  # marker coverage resolution per pixel side
+# A marker is a sticker on the skin and moves with it: with the fingers flexed the MCP markers
+# slide distally (soft tissue) past their knuckles' pads onto the base of the fingers, and they
+# show there too, where the finger's surface is at the marker's plane; a finger lying in front
+# of a marker (at least its radius in front of the plane) hides it. The back of the hand's
+# convex solids are one skin surface, so a marker shows wherever they are what the pixel sees.
+_ON_FINGER_M = 0.004
 
 
 @dataclass(frozen=True)
@@ -151,8 +157,9 @@ class Renderer:
 
     # ------------------------------------------------------------------------ drawing
 
-    def _markers(self, region: Region, mo: _Moment, colour, ids) -> tuple[np.ndarray, ...]:
-        """Blend the facing markers into ``colour`` where the back of the palm is in front.
+    def _markers(self, region: Region, mo: _Moment, colour, ids, zbuf) -> tuple[np.ndarray, ...]:
+        """Blend the facing markers into ``colour`` where the pixel sees the back of the hand, or
+        a finger's base at the marker's plane (``zbuf``: the region's depth).
 
         Returns rim-polygon centroids (6,2) and visible fractions (6,).
         """
@@ -186,7 +193,13 @@ class Renderer:
             cover = cv2.resize(mask, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
             cover = cover.astype(np.float32) / 255.0
             sl = (slice(y0 - ry0, y1 - ry0), slice(x0 - rx0, x1 - rx0))
-            alpha = cover * (ids[sl] == DORSUM)
+            # depth of the marker's plane along each pixel's ray (z = 1 rays: t is the depth)
+            rays = self.caster.rays.reshape(self.cam.height, self.cam.width, 3)[y0:y1, x0:x1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z_plane = float(normal @ centre[k]) / (rays @ normal)
+            on_skin = (ids[sl] == DORSUM) | (
+                (ids[sl] == HAND) & (zbuf[sl] >= z_plane - _ON_FINGER_M))
+            alpha = cover * on_skin
             total = float(cover.sum())
             vis[k] = float(alpha.sum()) / total if total > 0 else 0.0
             a = alpha[..., None]
@@ -279,7 +292,7 @@ class Renderer:
             if light is not None:
                 li = light if i == mid else light_i
                 cv2.multiply(colour, cv2.merge((li, li, li)), dst=colour)
-            c, v = self._markers(region, moments[i], colour, ids)
+            c, v = self._markers(region, moments[i], colour, ids, zbuf)
             acc += colour
             if i == mid:
                 z_mid, cents, vis = zbuf, c, v
