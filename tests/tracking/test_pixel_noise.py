@@ -18,6 +18,7 @@ from wristtrack.tracking.pixel_noise import (
     WINDOW_S,
     BlobCorrelation,
     filter_sigma,
+    worst_inflation,
 )
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
@@ -104,6 +105,41 @@ def test_the_sigma_the_filter_takes_stays_within_its_bounds():
     assert filter_sigma(0.3, 0.001, 2.0) == SIGMA_FLOOR
     assert filter_sigma(0.3, 3.0, 6.0) == 0.3  # never above the model's
     assert filter_sigma(0.1, 0.01, 1.0) == 0.1  # a model sharper than the floor keeps its own
+
+
+def test_before_the_correlation_is_measured_it_is_taken_at_its_worst():
+    """Errors constant over a window: inflated by its number of frames (as measured above)."""
+    assert worst_inflation(DT) == pytest.approx(WINDOW_S / DT)
+    assert _inflation(np.ones((MIN_WINDOWS * W, 6, 2))) == pytest.approx(W)
+    assert worst_inflation(2.0) == 1.0  # one frame per window at most
+    assert worst_inflation(0.0) is None  # no frame rate yet: the model's sigma
+
+
+def _sigmas_before_the_correlation(blob_sigma: float) -> list[float]:
+    """The pixel sigma the filter takes on each frame before MIN_WINDOWS windows are measured,
+    on the measurement-level simulator's flexion recording with white blob noise."""
+    rng = np.random.default_rng(6)
+    truth, camera, layout = scenario("flexion", rng=rng)
+    frames = simulate_detections(truth, camera, layout, NoiseModel(pixel_sigma=blob_sigma), rng)
+    tracker = Tracker(camera, layout, TrackerConfig())
+    sigmas = []
+    for f in frames:
+        tracker.step(f.detections)
+        learned = tracker.learned_noise
+        if learned.correlation.windows >= MIN_WINDOWS:
+            break
+        sigmas.append(learned.pixel_sigma or TrackerConfig().measurement.pixel_sigma)
+    return sigmas
+
+
+def test_sharp_blobs_are_trusted_more_before_their_correlation_is_known():
+    """0.05 px blobs reach the floor within the first windows, the worst correlation taken
+    (waiting for it kept the model's 0.3 px over these 65 frames); 0.3 px blobs keep the
+    model's sigma all along."""
+    sharp = _sigmas_before_the_correlation(0.05)
+    assert len(sharp) > 30 and sharp[-1] == SIGMA_FLOOR, sharp[-1]
+    noisy = _sigmas_before_the_correlation(0.3)
+    assert len(noisy) > 30 and min(noisy) == TrackerConfig().measurement.pixel_sigma
 
 
 def _run(name: str, seed: int, blob_sigma: float, adapt: bool):

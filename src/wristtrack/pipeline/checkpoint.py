@@ -37,7 +37,7 @@ CHECKPOINT_FILE = ".checkpoint.pkl"
 CHECKPOINT_FRAMES = 300  # default: a checkpoint at least every this many frames ...
 CHECKPOINT_SECONDS = 30.0  # ... and at least this often (s of wall time)
 _FORMAT = "wristtrack-checkpoint"
-_VERSION = 3  # 2: the tracker learns the skin's shape over the still start; 3: its noise
+_VERSION = 4  # 2: the skin's shape learned over the still start; 3: its noise; 4: the frame rate
 _SAMPLE = 1 << 20  # bytes hashed at each end of a video or bag file for its fingerprint
 _FINGERPRINT_NAMES = {
     "software": "software version",

@@ -178,6 +178,7 @@ class LearnedNoise:
     pixel_sigma: float | None = None  # what the filter takes (None: the model's)
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
+    _frame_interval: float = 0.0  # s, running mean of the frames' spacing (0: none yet)
     # the open window of frames for the correlation: (x, labels, uv) each, the observation
     # they were tracked with and the time they span
     _window: list = field(default_factory=list)
@@ -193,6 +194,9 @@ class LearnedNoise:
         changed."""
         if pixel:
             self._add_frame(obs, x, labels, det.uv, dt)
+        if dt > 0:
+            self._frame_interval = (0.9 * self._frame_interval + 0.1 * dt
+                                    if self._frame_interval else dt)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not (slide or pixel):
             return False
@@ -205,8 +209,11 @@ class LearnedNoise:
         if pixel:
             used = (obs.noise.pixel_sigma / noise.pixel_sigma) ** 2
             if self.pixel.update(scores.pixel, elapsed, used):
+                inflation = self.correlation.inflation
+                if inflation is None:  # not measured yet: the most it can be
+                    inflation = pixel_noise.worst_inflation(self._frame_interval)
                 self.pixel_sigma = pixel_noise.filter_sigma(
-                    noise.pixel_sigma, self.pixel.factor, self.correlation.inflation)
+                    noise.pixel_sigma, self.pixel.factor, inflation)
                 changed = True
         return changed
 
