@@ -59,9 +59,9 @@ class DetectorConfig:
     max_size_ratio: float = 3.2  # above: not marker(s)
     min_axis_ratio: float = 0.2  # minor / major below: a line, not a disc (~78 deg tilt)
     min_fill: float = 0.45  # weighted area / moment-ellipse area below: irregular shape. A
-    # sharp disc is ~0.93; under every realism effect at once (blur, JPEG, Bayer, shading, a
-    # knuckle hiding part of it) markers measure 0.68 at the median, 0.50 at the 0.1 % quantile
-    # (0.55 dropped 1-3 % of a left hand's markers at 45 deg flexion)
+    # sharp disc is ~0.93; under every realism effect at once (blur, JPEG, Bayer, shading)
+    # blobs measure 0.69 at the median, 0.48 at the 0.1 % quantile (both hands, 3 seeds; 0.55
+    # dropped 1-3 % of a left hand's markers at 45 deg flexion)
     max_skew: float = 0.18  # skewness above: clipped (lopsided) blob; ~8 % of a disc hidden
     waist_ratio: float = 0.85  # split a long blob where its profile dips to this fraction
     split_min_mass_ratio: float = 0.35
