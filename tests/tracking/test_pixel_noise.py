@@ -108,11 +108,34 @@ def test_the_sigma_the_filter_takes_stays_within_its_bounds():
 
 
 def test_before_the_correlation_is_measured_it_is_taken_at_its_worst():
-    """Errors constant over a window: inflated by its number of frames (as measured above)."""
-    assert worst_inflation(DT) == pytest.approx(WINDOW_S / DT)
-    assert _inflation(np.ones((MIN_WINDOWS * W, 6, 2))) == pytest.approx(W)
-    assert worst_inflation(2.0) == 1.0  # one frame per window at most
+    """Errors constant over a window: inflated by the number of frames a window holds, exactly
+    what the correlation measures for them once it can."""
+    assert worst_inflation(DT) == W
+    assert _inflation(np.ones((MIN_WINDOWS * W, 6, 2))) == pytest.approx(worst_inflation(DT))
+    assert worst_inflation(1 / 60) == 31
+    assert worst_inflation(2.0) == 2.0  # a window closes on its second frame at the earliest
     assert worst_inflation(0.0) is None  # no frame rate yet: the model's sigma
+
+
+def test_the_learner_takes_the_worst_case_from_its_windows():
+    """Before a window closes, the frames the open one will hold at its spacing; then the frames
+    the last one held (60 fps here: 31)."""
+    truth, camera, layout = scenario("deviation", rng=np.random.default_rng(0))
+    model = Tracker(camera, layout, TrackerConfig()).model
+    obs = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
+                            model.pose, False)
+    x = model.initial_state(np.eye(3), np.zeros(3))
+    uv = obs(x[None])[0].reshape(6, 2)
+    learned = noise_scale.LearnedNoise()
+    learned._add_frame(obs, x, np.arange(6), uv, 0.0)
+    assert learned._worst_inflation() is None  # one frame: no spacing yet
+    for _ in range(5):
+        learned._add_frame(obs, x, np.arange(6), uv, 1 / 60)
+    assert learned._worst_inflation() == 31
+    for _ in range(30):
+        learned._add_frame(obs, x, np.arange(6), uv, 1 / 60)
+    assert learned.correlation.windows == 1 and learned.correlation.frames == 31
+    assert learned._worst_inflation() == 31
 
 
 def _sigmas_before_the_correlation(blob_sigma: float) -> list[float]:

@@ -178,7 +178,6 @@ class LearnedNoise:
     pixel_sigma: float | None = None  # what the filter takes (None: the model's)
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
-    _frame_interval: float = 0.0  # s, running mean of the frames' spacing (0: none yet)
     # the open window of frames for the correlation: (x, labels, uv) each, the observation
     # they were tracked with and the time they span
     _window: list = field(default_factory=list)
@@ -194,9 +193,6 @@ class LearnedNoise:
         changed."""
         if pixel:
             self._add_frame(obs, x, labels, det.uv, dt)
-        if dt > 0:
-            self._frame_interval = (0.9 * self._frame_interval + 0.1 * dt
-                                    if self._frame_interval else dt)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not (slide or pixel):
             return False
@@ -211,7 +207,7 @@ class LearnedNoise:
             if self.pixel.update(scores.pixel, elapsed, used):
                 inflation = self.correlation.inflation
                 if inflation is None:  # not measured yet: the most it can be
-                    inflation = pixel_noise.worst_inflation(self._frame_interval)
+                    inflation = self._worst_inflation()
                 self.pixel_sigma = pixel_noise.filter_sigma(
                     noise.pixel_sigma, self.pixel.factor, inflation)
                 changed = True
@@ -235,6 +231,16 @@ class LearnedNoise:
         if self.pixel_sigma is not None:
             obs.set_pixel_sigma(self.pixel_sigma)
 
+    def _worst_inflation(self) -> float | None:
+        """The inflation of errors constant over a window (pixel_noise.worst_inflation): the
+        frames the last window held, or before one closed, the frames the open one will hold at
+        its spacing so far (None before it has two frames)."""
+        if self.correlation.frames:
+            return float(self.correlation.frames)
+        if len(self._window) < 2:
+            return None
+        return pixel_noise.worst_inflation(self._window_span / (len(self._window) - 1))
+
     def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
                    dt: float) -> None:
         """Keep one frame for the correlation; measure the window once it spans WINDOW_S. A new
@@ -243,7 +249,7 @@ class LearnedNoise:
             self._window, self._window_obs = [], obs
         self._window_span = self._window_span + max(dt, 0.0) if self._window else 0.0
         self._window.append((x, labels, uv))
-        if self._window_span < pixel_noise.WINDOW_S - 1e-6:  # (15 x 1/30 s: 0.5 - 6e-17)
+        if not pixel_noise.window_full(self._window_span):
             return
         # the window's predicted pixels in one call: per frame the step stays ~1 us
         X = np.stack([frame[0] for frame in self._window])

@@ -18,10 +18,10 @@ of the posterior residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the
 frames for a constant), measured as the track goes (``BlobCorrelation``; 5.3-6.7 on the
 rendered recordings, against 4.2-6.3 from the truth). Until MIN_WINDOWS windows are measured
 the inflation is taken at the most it can be, errors constant over a window
-(:func:`worst_inflation`, its number of frames): the per-frame noise, learned within a second,
-then already lowers the sigma of sharp blobs, where waiting for the correlation kept the model's
-0.3 px over the first ~2.3 s (structured light 0.483 -> 0.464 deg on the rendered recordings,
-3 seeds; the others within +-0.01).
+(:func:`worst_inflation`, the number of frames a window holds): the per-frame noise, learned
+within a second, then already lowers the sigma of sharp blobs, where waiting for the
+correlation kept the model's 0.3 px over the first ~2.3 s (structured light 0.483 -> 0.464 deg
+on the rendered recordings, 3 seeds; the others within +-0.01).
 
 It is kept within ``SIGMA_FLOOR`` and the model's sigma. Below the floor the errors the
 residuals cannot show dominate: blob errors along the pose's own patterns (all blobs shifted
@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 WINDOW_S = 0.5  # the span of frames whose errors the filter weighs together
+_SPAN_TOLERANCE = 1e-6  # s: 15 x 1/30 s sums to 0.5 - 6e-17, which closes a window
 TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
 MIN_WINDOWS = 4  # windows measured before the inflation is (the worst case until then)
 SIGMA_FLOOR = 0.15  # px
@@ -51,6 +52,7 @@ class BlobCorrelation:
     def __init__(self) -> None:
         self._num = self._den = 0.0  # forgetting sums of (sum_w e)^2 and sum_w e^2
         self.windows = 0
+        self.frames = 0  # frames the last window held
 
     def add(self, residuals: np.ndarray, span: float) -> None:
         """One window's residuals (frames, markers, 2) in px, NaN for markers not measured,
@@ -59,6 +61,7 @@ class BlobCorrelation:
         self._num = keep * self._num + float(np.sum(np.nansum(residuals, axis=0) ** 2))
         self._den = keep * self._den + float(np.nansum(residuals**2))
         self.windows += 1
+        self.frames = residuals.shape[0]
 
     @property
     def inflation(self) -> float | None:
@@ -69,12 +72,18 @@ class BlobCorrelation:
         return max(self._num / self._den, 1.0)
 
 
+def window_full(span: float) -> bool:
+    """Whether a window of frames spanning ``span`` s (first frame to last) is complete."""
+    return span >= WINDOW_S - _SPAN_TOLERANCE
+
+
 def worst_inflation(frame_interval: float) -> float | None:
-    """The inflation of blob errors constant over WINDOW_S: the number of frames in it, for
-    frames ``frame_interval`` s apart (None where that is unknown, not positive)."""
+    """The inflation of blob errors constant over a window: the number of frames a window
+    holds (:func:`window_full`) for frames ``frame_interval`` s apart, 16 at 30 fps (None where
+    the spacing is unknown, not positive)."""
     if not frame_interval > 0:
         return None
-    return max(WINDOW_S / frame_interval, 1.0)
+    return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
 
 
 def filter_sigma(model_sigma: float, frame_factor: float, inflation: float | None) -> float:

@@ -71,7 +71,9 @@ class Tracker:
         self.t_c0: np.ndarray | None = None
         self._track: _Track | None = None
         self._obs: dict[bool, MarkerObservation] = {}
-        self._compiled: tuple | None = None  # (step, its constants), built on first use
+        # (step, its constants): built on first use and again when W0, the layout or the noise
+        # learned change; whether the configuration and this process can compile it at all
+        self._compiled: tuple | None = None
         self._compiled_usable: bool | None = None
         self._frame = -1
         self._last_timestamp = -np.inf
@@ -210,7 +212,7 @@ class Tracker:
             self.surface = surface.learn_surface(self.camera, new, self.R_c0, self.t_c0,
                                                  still.depth_images, self.config.surface)
         self._obs = {}  # observation and compiled constants hold the layout and W0
-        self._compiled, self._compiled_usable = None, None
+        self._compiled = None
         self._track_id += 1
 
     def _observation(self, use_depth: bool) -> MarkerObservation:
@@ -230,7 +232,7 @@ class Tracker:
                           cfg.adapt_slide, cfg.learns_pixel_noise):
             for o in self._obs.values():
                 learned.apply(o)
-            self._compiled_usable = None  # the compiled step's constants made again
+            self._compiled = None  # the compiled step's constants made again
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
         cfg = self.config
@@ -336,22 +338,20 @@ class Tracker:
     def _compiled_frame(self, det: Detections, track: _Track, dt: float) -> tuple | None:
         """``_generic_frame``'s result from the compiled step, or None where this configuration
         or frame is not one it takes (or it declines the frame, having changed nothing)."""
-        if self._compiled_usable is None:  # again when W0, the layout or the noise learned change
-            cfg, obs = self.config, self._observation(True)
+        cfg = self.config
+        if self._compiled_usable is None:
             self._compiled_usable = (
                 type(self.model) is ConstantRateModel
                 and cfg.association == "gnn"
                 and cfg.use_depth
                 and not self.camera.has_distortion
+                and compiled.load() is not None
             )
-            step = compiled.load() if self._compiled_usable else None
-            if step is None:
-                self._compiled_usable = False
-            else:
-                args = compiled.frame_constants(
-                    self.model, obs, cfg.ukf, cfg.facing_cos, self.assoc_params
-                )
-                self._compiled = (step, args)
+        if self._compiled_usable and self._compiled is None:
+            args = compiled.frame_constants(
+                self.model, self._observation(True), cfg.ukf, cfg.facing_cos, self.assoc_params
+            )
+            self._compiled = (compiled.load(), args)
         if not self._compiled_usable or det.depth is None or det.count == 0:
             return None
         if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
