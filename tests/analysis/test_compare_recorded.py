@@ -91,14 +91,17 @@ def test_round_trip_recovers_offset_transform_and_the_evaluate_errors(trips, tmp
     constant, net = _constant_rotation_error(run, rec)
     ang, mm = _transform_errors(r, planted, constant)
     assert ang <= 0.1 and mm <= 0.5
-    assert r["rot_rmse_deg"] == pytest.approx(net, rel=0.05)
+    # the registration is an estimate too: 5 % plus its own error (3 of its stated sigmas,
+    # 0.02-0.03 deg and mm here), which matters where our errors are as small as these
+    sigma = r["registration"]["sigma"]
+    assert abs(r["rot_rmse_deg"] - net) <= 0.05 * net + 3 * sigma["rotation_deg"]
     # and likewise the constant part of our position error (the registration's translation);
     # the registration's rotation takes ~0.01 mm more or less than constant offsets alone, 5 %
     # of these 0.2 mm errors
     assert r["pos_rmse_mm"] == pytest.approx(
         _pos_rmse_net_of_constant_offsets(run, rec, hand_frame=False), rel=0.05, abs=0.015)
-    assert r["pos_rmse_mm"] <= ev["position_rmse_mm"] * 1.05
-    assert r["rot_rmse_deg"] <= ev["orientation_rmse_deg"] * 1.05
+    assert r["pos_rmse_mm"] <= ev["position_rmse_mm"] * 1.05 + 3 * sigma["translation_at_hand_mm"]
+    assert r["rot_rmse_deg"] <= ev["orientation_rmse_deg"] * 1.05 + 3 * sigma["rotation_deg"]
     assert r["frames_compared"] == ev["frames_compared"]
 
 
