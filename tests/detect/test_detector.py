@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from wristtrack.camera import Camera
-from wristtrack.detect.blobs import shapes, trimmed_depth
+from wristtrack.detect.blobs import centre_weights, shapes, trimmed_depth
 from wristtrack.detect.colour import (
     bhattacharyya,
     blob_similarities,
@@ -291,17 +291,46 @@ def test_shape_moments_match_opencv_and_skew_grows_with_clipping():
     sh = shapes(w)
     for k in range(3):
         m = cv2.moments(w[k])
-        assert sh.cx[k] == pytest.approx(m["m10"] / m["m00"], abs=1e-6)
-        assert sh.cy[k] == pytest.approx(m["m01"] / m["m00"], abs=1e-6)
+        c = cv2.moments(centre_weights(w[k]))  # the centre's weights (blobs module doc)
+        assert sh.cx[k] == pytest.approx(c["m10"] / c["m00"], abs=1e-6)
+        assert sh.cy[k] == pytest.approx(c["m01"] / c["m00"], abs=1e-6)
         assert sh.mass[k] == pytest.approx(m["m00"], rel=1e-6)
         cov = np.array([[m["mu20"], m["mu11"]], [m["mu11"], m["mu02"]]]) / m["m00"]
         lam = np.linalg.eigvalsh(cov)
         assert sh.major[k] == pytest.approx(4 * np.sqrt(lam[1]), rel=1e-6)
         assert sh.minor[k] == pytest.approx(4 * np.sqrt(lam[0]), rel=1e-6)
     assert sh.major[0] == pytest.approx(14.0, abs=0.1) and sh.minor[0] == pytest.approx(9, abs=0.1)
-    assert sh.cx[0] == pytest.approx(17.3, abs=0.01) and sh.cy[0] == pytest.approx(21.6, abs=0.01)
+    # the centre's knee locks a little onto the pixel grid where edges are this sharp (no blur)
+    assert sh.cx[0] == pytest.approx(17.3, abs=0.04) and sh.cy[0] == pytest.approx(21.6, abs=0.04)
     assert np.degrees(sh.angle[0]) == pytest.approx(30.0, abs=2.0)
     assert sh.skew[0] < 0.01 and sh.skew[1] < 0.01 and sh.skew[2] > 0.3
+
+
+def test_the_centre_leaves_the_background_noise_out():
+    """A 10 x 7 px disc, blurred, in the detector's support box (weights zero outside it) of
+    white blueness noise (sigma 0.05, as on a sharp camera frame): the plain weighted centroid
+    (OpenCV's moments) carries every background pixel's noise at its distance; the centre's
+    weights leave it out, 2.5x closer to the truth over 400 frames, without bias. The price is
+    a little locking onto the pixel grid, ~0.03 px at most with a 0.5 px blur."""
+    rng = np.random.default_rng(7)
+    truth = np.array([19.4, 20.7])
+    clean = cv2.GaussianBlur(coverage(40, truth, (10.0, 7.0), 25.0), (0, 0), 0.8)
+    box = np.zeros((40, 40))
+    box[12:30, 12:29] = 1.0
+    w = (clean[None] + rng.normal(0.0, 0.05, (400, 40, 40))) * box
+    sh = shapes(w)
+    ours = np.column_stack([sh.cx, sh.cy]) - truth
+    plain = np.array([[m["m10"] / m["m00"], m["m01"] / m["m00"]]
+                      for m in map(cv2.moments, w.astype(np.float32))]) - truth
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    assert rms(ours) < rms(plain) / 2.5, (rms(ours), rms(plain))
+    assert np.abs(ours.mean(axis=0)).max() < 0.005
+    locking = []
+    for dx in np.linspace(0.0, 1.0, 11):
+        at = np.array([19.0 + dx, 20.0 + 0.37 * dx])
+        sh = shapes(cv2.GaussianBlur(coverage(40, at, (10.0, 7.0), 25.0), (0, 0), 0.5)[None])
+        locking.append(np.hypot(sh.cx[0] - at[0], sh.cy[0] - at[1]))
+    assert 0.005 < max(locking) < 0.04, locking
 
 
 # --------------------------------------------------------------------- colour

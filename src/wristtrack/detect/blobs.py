@@ -7,9 +7,16 @@ Centre. Each pixel is weighted by its *blueness* t = (p - b).(m - b) / |m - b|^2
 of its colour p on the segment from the local background colour b (mean of a ring around the
 blob) to the marker colour m (mean of the blob): 0 on the background, 1 on the marker and,
 because optics and anti-aliasing mix colours linearly, the fraction of the pixel the marker
-covers in between. The weighted centroid is then the centroid of the marker's true footprint,
-free of the half-pixel steps of a thresholded mask. Weights are not clipped, so noise stays
-zero-mean on the background; they are scaled so the bluest pixel is 1 (sum = area in pixels).
+covers in between, free of the half-pixel steps of a thresholded mask; they are scaled so the
+bluest pixel is 1 (sum = area in pixels). The centre is the centroid of these weights with the
+background's taken out: clipped at 0 and, below CENTRE_KNEE, squared (w^2 / knee). The plain
+weighted centroid is unbiased for any centrally symmetric footprint, but every background pixel
+of the window adds its noise at its distance from the centre, and those dominated it: against
+the truth, sharp rendered blobs were 0.042 px off, JPEG ones 0.098, oblique dim ones at the
+extremes of a movement with every camera effect 0.21-0.31 (3 seeds). The knee takes the
+background's weights to ~0 and leaves the marker's own pixels linear (all squared, a highlight's
+bite out of the marker would count twice): 0.015 / 0.066 / 0.16-0.27 px, still unbiased for
+symmetric footprints (a squared weight is as symmetric as the weight).
 Where the background is two surfaces (a marker on the hand's edge: skin and table; a marker at
 an occluder's edge) each pixel is unmixed against the one that explains its colour better. A
 glossy marker's highlight (white added to the marker's colour) is read along the part of the
@@ -130,17 +137,28 @@ def _skewness(second, third) -> float:
 # weigh far pixels by distance cubed, so the zero-mean noise of the background around a small
 # blob would otherwise dominate them.
 SKEW_FLOOR = 0.2
+# Below this blueness the centre's weights fall off as its square (module doc, Centre).
+CENTRE_KNEE = 0.7
+
+
+def centre_weights(w: np.ndarray) -> np.ndarray:
+    """The weights of the centre (module doc): ``w`` clipped at 0, below CENTRE_KNEE squared
+    (w^2 / CENTRE_KNEE, continuous at the knee)."""
+    c = np.maximum(w, 0.0)
+    return np.where(c < CENTRE_KNEE, c * c / CENTRE_KNEE, c)
 
 
 def shapes(w: np.ndarray) -> Shapes:
-    """Shapes of a stack of weight windows (n, sy, sx)."""
+    """Shapes of a stack of weight windows (n, sy, sx): the mass, axes and angle from the
+    weights, the centre from :func:`centre_weights`, the skew from the firm weights."""
     n, sy, sx = w.shape
     X, Y, ox, oy = _basis(sy, sx)
-    both = np.empty((2 * n, sy, sx))
+    both = np.empty((3 * n, sy, sx))
     both[:n] = w
-    np.minimum(both[:n], 1.0, out=both[n:])
-    both[n:][both[n:] < SKEW_FLOOR] = 0.0
-    # raw moments: the weights, then the firm weights
+    np.minimum(both[:n], 1.0, out=both[n:2 * n])
+    both[n:2 * n][both[n:2 * n] < SKEW_FLOOR] = 0.0
+    both[2 * n:] = centre_weights(w)
+    # raw moments: the weights, the firm weights, the centre's weights
     rows = (Y @ (both @ X))[:, _POWERS[0], _POWERS[1]].tolist()
     out = np.empty((7, n))
     for k in range(n):
@@ -148,6 +166,8 @@ def shapes(w: np.ndarray) -> Shapes:
         l1, l2, angle = _principal(*second)
         _, _, _, second_f, third_f = _central(rows[n + k])
         skew = _skewness(second_f, third_f) if rows[n + k][0] > 0 else 0.0
+        if rows[2 * n + k][0] > 0:
+            _, mx, my, _, _ = _central(rows[2 * n + k])
         out[:, k] = (m00, mx + ox, my + oy, 4 * math.sqrt(l1), 4 * math.sqrt(l2), angle, skew)
     return Shapes(*out)
 
