@@ -40,18 +40,33 @@ def offline(reach, tmp_path_factory):
     return read_poses(out / "poses.csv")
 
 
-def _agree(live, offline, deg, mm):
-    """Poses of the frames the live run processed, against the offline run, in the camera frame:
-    W0 is the first tracked frame's hand pose, and frames dropped at the start (while the
-    compiled step loads on a busy machine) give the live run a later W0 and other angles."""
-    rows = np.asarray(live["frame"], int)
-    done = np.isin(live["status"], ("tracking", "coasting"))
-    assert done.sum() > 0.9 * (live["status"] != "dropped").sum()
+def _agree(live, reach, tmp_path, deg, mm):
+    """Poses of the frames the live run processed against an offline run over exactly those
+    frames (the folder cut to them), in the camera frame: a dropped frame gives the frames after
+    it a longer filter step, which the offline run over the same frames takes too, however many
+    a busy machine dropped. Not digit for digit: live, the colours are learnt in a thread and
+    handed over a frame or two later (pipeline/live/loop.py)."""
+    taken = live["status"] != "dropped"
+    frames = np.asarray(live["frame"][taken], int)
+    cut = tmp_path / "taken"
+    cut.mkdir()
+    for entry in reach.iterdir():
+        if entry.name != "frames.csv":
+            (cut / entry.name).symlink_to(entry)
+    lines = (reach / "frames.csv").read_text().splitlines()
+    (cut / "frames.csv").write_text("\n".join([lines[0]] + [lines[1 + i] for i in frames]) + "\n")
+    with FolderRecording(cut) as rec:
+        track_recording(rec, tmp_path / "taken-run", progress=False)
+    offline = read_poses(tmp_path / "taken-run" / "poses.csv")
+    status = live["status"][taken]
+    done = np.isin(status, ("tracking", "coasting"))
+    assert done.sum() > 0.9 * taken.sum()
+    np.testing.assert_array_equal(status, offline["status"])
     R_live, t_live = rows_to_poses(live)
     R_off, t_off = rows_to_poses(offline)
-    ang = np.degrees(rotation_distance(R_live[done], R_off[rows[done]]))
+    ang = np.degrees(rotation_distance(R_live[taken][done], R_off[done]))
     assert np.nanmax(ang) <= deg
-    err = np.linalg.norm(t_live[done] - t_off[rows[done]], axis=1) * 1e3
+    err = np.linalg.norm(t_live[taken][done] - t_off[done], axis=1) * 1e3
     assert np.nanmax(err) <= mm
 
 
@@ -96,7 +111,7 @@ def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
     assert 0 < live["latency_ms"]["p50"] <= live["latency_ms"]["p95"] <= live["latency_ms"]["max"]
     assert live["frame_period_ms"] == pytest.approx(1000 / 30, rel=1e-6)
     assert live["ended_by"] == "end of stream"
-    _agree(poses, offline, deg=0.5, mm=1.0)  # exact without drops; a drop perturbs a few frames
+    _agree(poses, reach, tmp_path, deg=0.5, mm=1.0)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["settings"]["live"] and summary["live"]["frames"] == live["frames"]
 
@@ -113,7 +128,6 @@ def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
     again = read_poses(tmp_path / "again" / "poses.csv")
     for col in ANGLES + ("tx", "ty", "tz"):
         np.testing.assert_allclose(again[col], offline[col], atol=1e-9, equal_nan=True)
-    _agree(poses, again, deg=0.5, mm=1.0)
 
 
 class Burst(Recording):
@@ -134,7 +148,7 @@ class Burst(Recording):
             yield frame
 
 
-def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, offline, tmp_path):
+def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, tmp_path):
     n = 60
     summary, live = track_live(Burst(reach, n), tmp_path / "run")
     poses = read_poses(tmp_path / "run" / "poses.csv")
@@ -150,7 +164,7 @@ def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, offline, tmp_p
     lat = np.asarray(live["per_frame"]["latency_ms"])
     assert (lat[1:] <= 2 * proc.max() + 15).all()
     assert summary["frames"]["tracked"] == live["frames"]["processed"]
-    _agree(poses, offline, deg=3.0, mm=5.0)
+    _agree(poses, reach, tmp_path, deg=0.5, mm=1.0)
 
 
 def test_ctrl_c_ends_the_session_with_complete_outputs(reach, tmp_path):
