@@ -2,15 +2,16 @@
 
 ``MeasurementNoise.pixel_sigma``, 0.3 px, covers the worst of blur, compression and highlights
 together; sharp blobs are good to 0.015 px (detect/blobs.py), and the filter that takes them
-at 0.3 px leaves most of what their pixels say about the out-of-plane angles to depth. Where depth is poor that costs
-most: structured-light depth at 0.56 deg against 0.28 clean (docs/BENCHMARKS.md at 1869a59), 0.43
-with the pixels taken at 0.15 px throughout.
+at 0.3 px leaves most of what their pixels say about the out-of-plane angles to depth. Where
+depth is poor that costs most: structured-light depth at 0.56 deg against 0.28 clean
+(docs/BENCHMARKS.md at 1869a59), 0.43 with the pixels taken at 0.15 px throughout.
 
 Variance-component estimation (tracking/noise_scale.py) measures the blob centres' noise frame
 by frame: 0.03-0.05 px on sharp rendered blobs (0.037 against the truth), 0.14 under H.264 (0.13),
-with the plain weighted centroid the detector had then. The filter cannot take that figure as it is: the blob errors are correlated in time (the pixel
-grid, the codec's blocks and the blur change slowly while the hand moves slowly), and the
-filter, which weighs about half a second of frames, meets them larger than one frame's noise.
+with the plain weighted centroid the detector had then. The filter cannot take that figure as
+it is: the blob errors are correlated in time (the pixel grid, the codec's blocks and the blur
+change slowly while the hand moves slowly), and the filter, which weighs about half a second of
+frames, meets them larger than one frame's noise.
 Against the truth, on the rendered recordings, the variance of half-second means of a blob's
 error is 4-6x what white noise of its per-frame spread would give. So the sigma is the
 white-noise equivalent over WINDOW_S: the per-frame variance times the inflation that windows
