@@ -224,7 +224,8 @@ def test_realsense_distortion_is_read_from_the_recording(short, tmp_path):
         assert rec.camera.depth_scale == pytest.approx(0.0001, rel=1e-6)
 
 
-def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_file, tmp_path):
+def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_file,
+                                                           cut_recording, tmp_path):
     """Played at its own pace, as a camera: on a loaded machine frames may be dropped (by the
     SDK's real-time playback or the newest-frame rule), and the frames after a drop are filtered
     with a longer step. So the live rows are compared with an offline run over exactly the
@@ -245,11 +246,7 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
     k = np.searchsorted(stamps, recorded - 1e-6)
     np.testing.assert_allclose(stamps[k], recorded, atol=1e-6)
     assert (np.diff(k) > 0).all()
-    took = tmp_path / "took"
-    took.mkdir()
-    for name in ("camera.json", "rgb", "depth"):
-        (took / name).symlink_to(reach / name)
-    (took / "frames.csv").write_text("\n".join([lines[0]] + [lines[1 + i] for i in k]) + "\n")
+    took = cut_recording(reach, k, tmp_path / "took", hand=False)
     assert main(["track", str(took), "--out", str(tmp_path / "off"), "--no-report",
                  "--no-progress"]) == 0
     off = read_poses(tmp_path / "off" / "poses.csv")
@@ -263,7 +260,7 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
 
 
 def test_track_reads_a_realsense_recording_offline_frame_by_frame(reach, realsense_file,
-                                                                   tmp_path):
+                                                                   cut_recording, tmp_path):
     """Given as a file (not --live), an SDK recording is read in full, as fast as the tracker
     takes it: the same poses as the recording folder it was made from, frame by frame."""
     with open_recording(realsense_file) as rec:
@@ -275,12 +272,8 @@ def test_track_reads_a_realsense_recording_offline_frame_by_frame(reach, realsen
         np.testing.assert_array_equal(got.bgr, frame.bgr)
     assert main(["track", str(realsense_file), "--out", str(tmp_path / "bag"), "--no-report",
                  "--no-progress"]) == 0
-    first = tmp_path / "first12"  # the folder cut to the frames that were recorded (and, as
-    first.mkdir()                # in the SDK file, without hand.json)
-    for name in ("camera.json", "rgb", "depth"):
-        (first / name).symlink_to(reach / name)
-    lines = (reach / "frames.csv").read_text().splitlines()[:13]
-    (first / "frames.csv").write_text("\n".join(lines) + "\n")
+    # the folder cut to the frames that were recorded (and, as in the SDK file, without hand.json)
+    first = cut_recording(reach, range(12), tmp_path / "first12", hand=False)
     assert main(["track", str(first), "--out", str(tmp_path / "off"), "--no-report",
                  "--no-progress"]) == 0
     bag = read_poses(tmp_path / "bag" / "poses.csv")

@@ -40,21 +40,14 @@ def offline(reach, tmp_path_factory):
     return read_poses(out / "poses.csv")
 
 
-def _agree(live, reach, tmp_path, deg, mm):
+def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     """Poses of the frames the live run processed against an offline run over exactly those
     frames (the folder cut to them), in the camera frame: a dropped frame gives the frames after
     it a longer filter step, which the offline run over the same frames takes too, however many
     a busy machine dropped. Not digit for digit: live, the colours are learnt in a thread and
     handed over a frame or two later (pipeline/live/loop.py)."""
     taken = live["status"] != "dropped"
-    frames = np.asarray(live["frame"][taken], int)
-    cut = tmp_path / "taken"
-    cut.mkdir()
-    for entry in reach.iterdir():
-        if entry.name != "frames.csv":
-            (cut / entry.name).symlink_to(entry)
-    lines = (reach / "frames.csv").read_text().splitlines()
-    (cut / "frames.csv").write_text("\n".join([lines[0]] + [lines[1 + i] for i in frames]) + "\n")
+    cut = cut_recording(reach, np.asarray(live["frame"][taken], int), tmp_path / "taken")
     with FolderRecording(cut) as rec:
         track_recording(rec, tmp_path / "taken-run", progress=False)
     offline = read_poses(tmp_path / "taken-run" / "poses.csv")
@@ -88,7 +81,7 @@ def test_newest_frame_wins_and_the_rest_are_counted():
 
 
 def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
-    reach, offline, tmp_path, capsys, check_run
+    reach, offline, cut_recording, tmp_path, capsys, check_run
 ):
     run, copy = tmp_path / "run", tmp_path / "copy"
     code = main(["track", "--live", f"replay:{reach}", "--out", str(run), "--record", str(copy),
@@ -111,7 +104,7 @@ def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
     assert 0 < live["latency_ms"]["p50"] <= live["latency_ms"]["p95"] <= live["latency_ms"]["max"]
     assert live["frame_period_ms"] == pytest.approx(1000 / 30, rel=1e-6)
     assert live["ended_by"] == "end of stream"
-    _agree(poses, reach, tmp_path, deg=0.5, mm=1.0)
+    _agree(poses, reach, cut_recording, tmp_path, deg=0.5, mm=1.0)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["settings"]["live"] and summary["live"]["frames"] == live["frames"]
 
@@ -148,7 +141,7 @@ class Burst(Recording):
             yield frame
 
 
-def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, tmp_path):
+def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, cut_recording, tmp_path):
     n = 60
     summary, live = track_live(Burst(reach, n), tmp_path / "run")
     poses = read_poses(tmp_path / "run" / "poses.csv")
@@ -164,7 +157,7 @@ def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, tmp_path):
     lat = np.asarray(live["per_frame"]["latency_ms"])
     assert (lat[1:] <= 2 * proc.max() + 15).all()
     assert summary["frames"]["tracked"] == live["frames"]["processed"]
-    _agree(poses, reach, tmp_path, deg=0.5, mm=1.0)
+    _agree(poses, reach, cut_recording, tmp_path, deg=0.5, mm=1.0)
 
 
 def test_ctrl_c_ends_the_session_with_complete_outputs(reach, tmp_path):
