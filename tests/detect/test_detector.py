@@ -225,6 +225,9 @@ def test_clipped_marker_is_flagged():
     assert dist[1] < 4 and det.last_blobs[j[1]].suspect
     assert det.last_blobs[j[1]].reason == "clipped"
     assert not any(det.last_blobs[k].suspect for k in j[[0, 2, 3, 4, 5]])
+    # the tracker gets the flags with the centres, blob for blob
+    np.testing.assert_array_equal(d.suspect, [b.suspect for b in det.last_blobs])
+    assert d.suspect[j[1]] and d.suspect.sum() == 1
 
 
 def test_a_specular_highlight_on_the_rim_does_not_pull_the_centre():

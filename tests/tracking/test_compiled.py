@@ -71,12 +71,21 @@ def _random_frame(rng, obs):
         clutter = np.vstack((clutter, y[rng.integers(6)] + rng.normal(0, 1, 3) * [3, 3, 3e-3]))
     z = np.vstack((seen, clutter))
     z = z[rng.permutation(len(z))]
-    return Detections(1.0, z[:, :2].copy(), z[:, 2].copy()), x, P, dt
+    suspect = rng.random(len(z)) < 0.3
+    return Detections(1.0, z[:, :2].copy(), z[:, 2].copy(), suspect=suspect), x, P, dt
+
+
+def _blob_var(obs, det: Detections) -> np.ndarray:
+    """The step's per-blob pixel variance, as the tracker passes it."""
+    return obs.blob_variance(det.suspect, det.count)
 
 
 def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
+    """Suspect blobs among them, taken at the model's pixel sigma above a learned one."""
     tracker = _initialised_tracker(seed=7)
     obs = tracker._observation(True)
+    obs.set_pixel_sigma(0.1)
+    assert obs.suspect_variance == pytest.approx(0.3**2 - 0.1**2)
     cfg = tracker.config
     args = compiled.frame_constants(tracker.model, obs, cfg.ukf, cfg.facing_cos,
                                     tracker.assoc_params)  # fmt: skip
@@ -84,7 +93,8 @@ def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
     outcomes = {compiled.OK: 0, compiled.DECLINED: 0}
     for _ in range(400):
         det, x, P, dt = _random_frame(rng, obs)
-        code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth, *args)
+        code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth,
+                                                     _blob_var(obs, det), *args)
         outcomes[code] += 1
         x_g, P_g, labels_g, n_g, nis_g, dof_g = tracker._generic_frame(det, _Track(x, P, 0.0), dt)
         if code == compiled.DECLINED:
@@ -109,17 +119,18 @@ def test_compiled_step_declines_what_only_the_generic_path_handles(step):
     rng = np.random.default_rng(4)
     while True:  # a frame the step takes
         det, x, P, dt = _random_frame(rng, obs)
-        if step(x, P, dt, det.uv, det.depth, *args)[0] == compiled.OK:
+        if step(x, P, dt, det.uv, det.depth, _blob_var(obs, det), *args)[0] == compiled.OK:
             break
     indefinite = P.copy()
     indefinite[4, 4] = -1e-3  # the generic path repairs it (safe_cholesky); the step declines
-    assert step(x, indefinite, dt, det.uv, det.depth, *args)[0] == compiled.DECLINED
+    blob_var = _blob_var(obs, det)
+    assert step(x, indefinite, dt, det.uv, det.depth, blob_var, *args)[0] == compiled.DECLINED
     away = x.copy()
     away[:9] = Rotation.from_rotvec([np.pi, 0, 0]).as_matrix().reshape(9)  # palm turned away
-    assert step(away, P, dt, det.uv, det.depth, *args)[0] == compiled.DECLINED
+    assert step(away, P, dt, det.uv, det.depth, blob_var, *args)[0] == compiled.DECLINED
     uv = det.uv.copy()
     uv[0] = np.nan
-    assert step(x, P, dt, uv, det.depth, *args)[0] == compiled.DECLINED
+    assert step(x, P, dt, uv, det.depth, blob_var, *args)[0] == compiled.DECLINED
     # what the tracker returns for a declined frame is the generic path's, unchanged
     track = _Track(x, indefinite, 0.0)
     assert tracker._compiled_frame(det, track, dt) is None

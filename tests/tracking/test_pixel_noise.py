@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wristtrack.detect.detections import Detections
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import scenario
 from wristtrack.sim.scenario_run import score_run
@@ -72,8 +73,9 @@ def test_unseen_markers_and_the_first_windows():
 
 def test_the_learner_measures_windows_of_frames_as_they_come():
     """LearnedNoise gathers the tracked frames' posterior residuals into windows of WINDOW_S
-    and starts a new window where the observation changes (W0 or the layout moved): frames at
-    30 fps with the blobs exactly where the state puts them give residuals of zero."""
+    and starts a new window where the observation changes (W0 or the layout moved), leaving
+    out suspect blobs: frames at 30 fps with every blob 0.1 px off where the state puts them but
+    a suspect one, off by +-2 px in turn (with it the window's ratio would be 0.47, not W)."""
     truth, camera, layout = scenario("deviation", rng=np.random.default_rng(0))
     tracker = Tracker(camera, layout, TrackerConfig())
     model = tracker.model
@@ -81,21 +83,24 @@ def test_the_learner_measures_windows_of_frames_as_they_come():
                             model.pose, False)
     x = model.initial_state(np.eye(3), np.zeros(3))
     uv = obs(x[None])[0].reshape(6, 2) + 0.1  # every blob 0.1 px off in u and v
+    suspect = np.arange(6) == 2
+    frames = [Detections(0.0, uv + np.outer(suspect, [2.0 * (-1) ** k, 0.0]), suspect=suspect)
+              for k in range(W)]
     labels = np.arange(6)
     learned = noise_scale.LearnedNoise()
-    for _ in range(W - 1):
-        learned._add_frame(obs, x, labels, uv, DT)
+    for det in frames[:-1]:
+        learned._add_frame(obs, x, labels, det, DT)
     assert learned.correlation.windows == 0
-    learned._add_frame(obs, x, labels, uv, DT)
+    learned._add_frame(obs, x, labels, frames[-1], DT)
     assert learned.correlation.windows == 1
     # a constant error: the window's inflation is its number of frames
     assert learned.correlation._num / learned.correlation._den == pytest.approx(W)
     other = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
                               model.pose, False)
     for _ in range(W - 1):
-        learned._add_frame(obs, x, labels, uv, DT)
+        learned._add_frame(obs, x, labels, frames[0], DT)
     for _ in range(W - 1):  # the window restarts with the new observation
-        learned._add_frame(other, x, labels, uv, DT)
+        learned._add_frame(other, x, labels, frames[0], DT)
     assert learned.correlation.windows == 1
 
 
@@ -125,15 +130,15 @@ def test_the_learner_takes_the_worst_case_from_its_windows():
     obs = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
                             model.pose, False)
     x = model.initial_state(np.eye(3), np.zeros(3))
-    uv = obs(x[None])[0].reshape(6, 2)
+    det = Detections(0.0, obs(x[None])[0].reshape(6, 2))
     learned = noise_scale.LearnedNoise()
-    learned._add_frame(obs, x, np.arange(6), uv, 0.0)
+    learned._add_frame(obs, x, np.arange(6), det, 0.0)
     assert learned._worst_inflation() is None  # one frame: no spacing yet
     for _ in range(5):
-        learned._add_frame(obs, x, np.arange(6), uv, 1 / 60)
+        learned._add_frame(obs, x, np.arange(6), det, 1 / 60)
     assert learned._worst_inflation() == 31
     for _ in range(30):
-        learned._add_frame(obs, x, np.arange(6), uv, 1 / 60)
+        learned._add_frame(obs, x, np.arange(6), det, 1 / 60)
     assert learned.correlation.windows == 1 and learned.correlation.frames == 31
     assert learned._worst_inflation() == 31
 

@@ -18,13 +18,17 @@ class Detections:
     be a reading (zero, negative, infinite) is taken as NaN; a non-finite centre is an
     InputError. ``depth_image`` is the raw depth frame (H, W) the blobs' depths were read from
     (registered to colour, camera.depth_scale units), where the detector had one: the tracker
-    reads the skin between the markers in it (tracking/surface.py).
+    reads the skin between the markers in it (tracking/surface.py). ``suspect`` (M,) marks the
+    blobs whose centre the detector doubts (``Blob.suspect``: clipped, split, elongated, on the
+    border, a streak), or is None: none doubted. The tracker takes a suspect centre at the
+    model's pixel noise, never at the lower noise it learns from the other blobs.
     """
 
     timestamp: float
     uv: np.ndarray
     depth: np.ndarray | None = None
     depth_image: np.ndarray | None = field(default=None, repr=False, compare=False)
+    suspect: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
@@ -41,6 +45,14 @@ class Detections:
             if not valid.all():
                 depth = np.where(valid, depth, np.nan)
             object.__setattr__(self, "depth", depth)
+        if self.suspect is not None:
+            suspect = np.asarray(self.suspect, dtype=bool).reshape(-1)
+            if suspect.shape[0] != uv.shape[0]:
+                raise InputError(
+                    f"detections at t={self.timestamp}: {uv.shape[0]} blobs but "
+                    f"{suspect.shape[0]} suspect flags; give one flag per blob"
+                )
+            object.__setattr__(self, "suspect", suspect)
         if not np.isfinite(uv).all():
             raise InputError(
                 f"detections at t={self.timestamp}: blob centres must be finite pixel positions, "

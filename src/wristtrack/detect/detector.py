@@ -63,7 +63,7 @@ from wristtrack.hand import MARKER_NAMES
 
 @dataclass(frozen=True)
 class Blob:
-    """One detected blob (full details; ``Detections`` carries only uv and depth).
+    """One detected blob (full details; ``Detections`` carries its uv, depth and suspect flag).
 
     ``suspect`` marks a measurement not to take at face value; ``reason`` says why: "split"
     (one of two markers cut from a merged blob), "elongated" (too long for one marker, no waist
@@ -204,7 +204,8 @@ class MarkerDetector(MarkerLearning):
         self.last_blobs = blobs
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
-        return Detections(timestamp, uv, d, depth_image=depth)
+        suspect = np.array([b.suspect for b in blobs], dtype=bool)
+        return Detections(timestamp, uv, d, depth_image=depth, suspect=suspect)
 
     def _short(self, blobs: list[Blob]) -> bool:
         """Fewer blobs than the last frame had markers (at most six): some may be missed."""

@@ -151,10 +151,12 @@ def _jit(numba) -> Callable:
     _kernel_step = numba.njit(nogil=True, error_model="numpy")(kernel.step)
     digest = _code_digest(functions)
 
-    def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
+    def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
         if digest < 0:  # never: the digest is there to be part of the cache key
-            return _kernel_step(x, P, -dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par)
-        return _kernel_step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par)
+            return _kernel_step(x, P, -dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm,
+                                wc, par)
+        return _kernel_step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc,
+                            par)
 
     try:
         return numba.njit(cache=True, nogil=True, error_model="numpy")(step)
@@ -187,8 +189,9 @@ def _warm_up_arguments() -> tuple:
     """Arguments of the types the tracker passes (C-contiguous writable float64 arrays, a float
     dt), so the compile done here is the one every frame uses. The values do not matter."""
     x = np.concatenate((np.eye(3).reshape(9), np.zeros(9)))
-    return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros((6, 3)), np.zeros((6, 3)),
-            np.eye(3), np.ones(3), np.ones(37), np.ones(37), np.ones(_N_PAR))  # fmt: skip
+    return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros(1), np.zeros((6, 3)),
+            np.zeros((6, 3)), np.eye(3), np.ones(3), np.ones(37), np.ones(37),
+            np.ones(_N_PAR))  # fmt: skip
 
 
 def _first_line(err: BaseException) -> str:

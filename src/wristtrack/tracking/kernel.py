@@ -86,16 +86,17 @@ def _forward(L, B):
 # --------------------------------------------------------------------------- the step
 
 
-def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
+def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
     """One tracking frame: (code, x, P, labels, markers associated, NIS); see the module.
 
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance; dt the step;
-    uv (M, 2) and depth (M,) the blobs (all depths finite); layout (J, 3) the markers in the hand
-    frame; slide (J, 3) each marker's share in the common skin slide (MarkerObservation.slide);
-    R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 sigma
-    points ordered 0, +columns of L, -columns of L, +noise, -noise (the weights of all but the
-    first are equal, so this is ukf.sigma_offsets' set); par the constants
-    (``compiled.frame_constants``).
+    uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
+    each blob adds to its marker's in the update (observation.update_noise); layout (J, 3) the
+    markers in the hand frame; slide (J, 3) each marker's share in the common skin slide
+    (MarkerObservation.slide); R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented
+    weights, S = 37 sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
+    weights of all but the first are equal, so this is ukf.sigma_offsets' set); par the
+    constants (``compiled.frame_constants``).
     """
     n, M, m = 12, uv.shape[0], 3 * layout.shape[0]
     labels = np.empty(M, dtype=np.int64)
@@ -137,7 +138,7 @@ def step(x, P, dt, uv, depth, layout, slide, R_c0, t_c0, wm, wc, par):
             for j in range(n):
                 P_out[i, j] = 0.5 * (C[m + i, m + j] + C[m + j, m + i])
     else:
-        nis = _correct(C, mean, uv, depth, blob_of, n_pairs, q, pvw, P_out)
+        nis = _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out)
         if nis != nis:
             return DECLINED, x_out, P_out, labels, 0, np.nan
     _write_state(q, pvw, x_out)
@@ -382,14 +383,16 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
     return n_pairs
 
 
-def _correct(C, mean, uv, depth, blob_of, n_pairs, q, pvw, P_out):
-    """ukf.update with the associated markers' rows (axis-major, in marker order) and
-    the retraction of the correction into (q, pvw); P_out gets the covariance. Returns the NIS,
-    NaN where the innovation covariance is not positive definite."""
+def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out):
+    """ukf.update with the associated markers' rows (axis-major, in marker order), their
+    blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw);
+    P_out gets the covariance. Returns the NIS, NaN where the innovation covariance is not
+    positive definite."""
     J, n = blob_of.shape[0], 12
     m = 3 * J
     k = 3 * n_pairs
     rows = np.empty(k, dtype=np.int64)
+    extra = np.zeros(k)  # each row's own addition to the noise
     Ae = np.empty((k, n + 1))  # [Pyx | nu], whitened in place: L^-1 [Pyx | nu]
     r = 0
     for a in range(3):
@@ -398,11 +401,14 @@ def _correct(C, mean, uv, depth, blob_of, n_pairs, q, pvw, P_out):
             if b >= 0:
                 rows[r] = a * J + j
                 Ae[r, n] = (uv[b, a] if a < 2 else depth[b]) - mean[a * J + j]
+                if a < 2:
+                    extra[r] = blob_var[b]
                 r += 1
     Sub = np.empty((k, k))
     for i in range(k):
         for c in range(k):
             Sub[i, c] = C[rows[i], rows[c]]
+        Sub[i, i] += extra[i]
         for c in range(n):
             Ae[i, c] = C[rows[i], m + c]
     Ls = np.empty((k, k))

@@ -92,7 +92,9 @@ def frame_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
     (its slide at ``slide_factor`` times the model's variance, its pixel sigma whatever it is),
     the blobs ``det`` labelled ``labels``; each B at its model value (the slide's, and
     ``model_pixel_sigma``). None where the frame cannot tell: fewer than MIN_MARKERS markers, a
-    marker given several blobs (the paper's association)."""
+    marker given several blobs (the paper's association). Suspect blobs are left out
+    (:func:`undoubted`)."""
+    labels = undoubted(labels, det)
     taken = labels[labels >= 0]
     if np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
         return None
@@ -112,6 +114,13 @@ def frame_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
         return FrameScores(slide, component_scores(residual, R, HPH, B_pixel))
     except np.linalg.LinAlgError:
         return None
+
+
+def undoubted(labels: np.ndarray, det) -> np.ndarray:
+    """``labels`` with the suspect blobs of ``det`` (Detections) as clutter: they are taken at
+    the model's pixel sigma whatever is learned (MarkerObservation.suspect_variance), and the
+    noise is learned from the blobs it is taken for."""
+    return labels if det.suspect is None else np.where(det.suspect, -1, labels)
 
 
 @dataclass
@@ -190,9 +199,9 @@ class LearnedNoise:
         """Learn from one tracked frame (posterior x, P; MarkerObservation ``obs``; the blobs
         ``det`` labelled ``labels``, ``dt`` after the last frame) with the model's ``noise``,
         learning the slide and/or the pixel sigma; whether what the filter should take
-        changed."""
+        changed. Suspect blobs are left out (:func:`undoubted`)."""
         if pixel:
-            self._add_frame(obs, x, labels, det.uv, dt)
+            self._add_frame(obs, x, labels, det, dt)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not (slide or pixel):
             return False
@@ -241,14 +250,13 @@ class LearnedNoise:
             return None
         return pixel_noise.worst_inflation(self._window_span / (len(self._window) - 1))
 
-    def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,
-                   dt: float) -> None:
+    def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, det, dt: float) -> None:
         """Keep one frame for the correlation; measure the window once it spans WINDOW_S. A new
         observation (W0 or the layout changed) starts a new window."""
         if obs is not self._window_obs:
             self._window, self._window_obs = [], obs
         self._window_span = self._window_span + max(dt, 0.0) if self._window else 0.0
-        self._window.append((x, labels, uv))
+        self._window.append((x, undoubted(labels, det), det.uv))
         if not pixel_noise.window_full(self._window_span):
             return
         # the window's predicted pixels in one call: per frame the step stays ~1 us

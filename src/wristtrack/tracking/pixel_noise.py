@@ -31,6 +31,11 @@ rendered clean recordings came out at 0.30 deg at 0.1 px, 0.27 at 0.15, 0.28 at 
 Above the model's, what the residuals show is mostly the layout's error (without hand.json, a
 constant per marker), which is no noise: raising the sigma for it made the every-effect
 recordings worse.
+
+All of this is learned from, and taken for, the blobs the detector does not doubt. A suspect
+blob (clipped, split, elongated, on the border, a streak: ``Detections.suspect``) is taken at the
+model's sigma whatever is learned (``MarkerObservation.suspect_variance``) and left out of the
+learning (``noise_scale.undoubted``).
 """
 
 from __future__ import annotations

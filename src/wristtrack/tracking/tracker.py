@@ -171,7 +171,7 @@ class Tracker:
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
         limit = _nis_limit(self.config.nis_quantile, 2 * np.unique(labels[labels >= 0]).size)
-        return markers_on_blobs(self._observation(False), x, labels, det.uv, limit)
+        return markers_on_blobs(self._observation(False), x, labels, det.uv, limit, det.suspect)
 
     def start_track(self, det: Detections, init: InitResult) -> FrameResult:
         """A new track (and track_id) from the initialisation ``init`` of this frame, its pose
@@ -359,7 +359,9 @@ class Tracker:
         step, args = self._compiled
         # contiguous blobs and a float dt: numba compiles once per argument type
         uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
-        code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, *args)
+        blob_var = self._observation(True).blob_variance(det.suspect, det.count)
+        code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, blob_var,
+                                                *args)
         if code != compiled.OK:
             return None
         return x, P, labels, n_pairs, nis, 3 * n_pairs
@@ -402,7 +404,8 @@ class Tracker:
             labels[local >= 0] = marker_ids[local[local >= 0]]
             rows, values = observation.stacked_rows(labels, z, k)
             if rows.size:
-                res = ukf.update(model, x, P, pred, values, R[np.ix_(rows, rows)], rows=rows)
+                R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
+                res = ukf.update(model, x, P, pred, values, R_u, rows=rows)
                 x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
         n_assoc = int(np.unique(labels[labels >= 0]).size)
