@@ -178,12 +178,15 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
 
 def _learned_noise(noise: dict[str, Any]) -> str:
     """summary.json's measurement_noise in words (tracking/noise_scale.py)."""
-    inflation = noise.get("blob_error_inflation")
+    inflation, spread = noise.get("blob_error_inflation"), noise.get("blob_error_px")
+    scatter = (f", their scatter about the hand's pose {_fmt(spread, 3)} px per frame"
+               if spread is not None else "")
     correlated = (f", their errors correlated in time (half-second means {_fmt(inflation, 1)}x "
                   "the variance of white noise's)" if inflation is not None else "")
     return (f"blob centres taken at {_fmt(noise.get('pixel_sigma_px'), 2)} px (model "
-            f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){correlated}; skin slide over "
-            f"the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the model's")
+            f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){scatter}{correlated}; skin "
+            f"slide over the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the "
+            "model's")
 
 
 def _notes(summary: dict[str, Any], columns: dict[str, np.ndarray]) -> str:

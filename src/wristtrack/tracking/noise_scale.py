@@ -1,4 +1,4 @@
-"""How much noise this recording's markers carry, learned as it goes: variance components.
+"""How much noise this recording's markers carry, learned as it goes.
 
 Two parts of the measurement noise differ from recording to recording, and the fixed model
 costs accuracy wherever they are smaller than it says:
@@ -11,13 +11,14 @@ costs accuracy wherever they are smaller than it says:
   against 0.63 on colour alone, where per-frame PnP, which models no slide, had beaten the
   filter (docs/BENCHMARKS.md);
 - the blobs' own pixel noise (``MeasurementNoise.pixel_sigma``), 0.3 px to cover the worst of
-  blur, compression and highlights together, where sharp blobs are good to 0.04 px
-  (tracking/pixel_noise.py says how the learned figure is used).
+  blur, compression and highlights together, where sharp blobs are good to 0.015 px: measured
+  on the blobs alone, each frame's scatter around its best rigid pose
+  (tracking/pixel_noise.py), and gathered here (``LearnedNoise``).
 
-Each is scaled by a factor (on the variance) estimated from the recording: variance-component
-estimation. For an innovation nu ~ N(0, S), S = A + lambda B with B the component at its model
-value, the likelihood is stationary in lambda where nu^T S^-1 B S^-1 nu = tr(S^-1 B); the
-fixed-point step
+The slide is scaled by a factor (on the variance) estimated from the recording:
+variance-component estimation. For an innovation nu ~ N(0, S), S = A + lambda B with B the
+component at its model value, the likelihood is stationary in lambda where
+nu^T S^-1 B S^-1 nu = tr(S^-1 B); the fixed-point step
 
     lambda <- lambda * sum_t nu^T S^-1 B S^-1 nu / sum_t tr(S^-1 B)
 
@@ -27,9 +28,7 @@ computed from the update's posterior, which the tracker keeps (the compiled step
 else): with R the measurement noise, e = y - h(x+) the posterior residual and P+ the posterior,
 S^-1 nu = R^-1 e and S^-1 = R^-1 - R^-1 H P+ H^T R^-1 (Woodbury), exact for a linear update.
 (The posterior is the frame's, after the skin's depth update too: a little tighter than the
-markers' alone, which lowers the factors a little.) EM's fixed point is right only where the
-filter takes the value learned; the pixel sigma it takes is bounded (tracking/pixel_noise.py),
-and there a scoring step replaces it (``VarianceFactor.update``).
+markers' alone, which lowers the factor a little.)
 
 The slide moves slowly, so the prior has already followed part of it and the estimate comes out
 below the slide's white-noise equivalent (0.55-0.8 of the model's sigma on the rendered
@@ -40,7 +39,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -50,53 +48,42 @@ from wristtrack.tracking.observation import MeasurementNoise, stacked_rows
 
 # Memory of the estimate: the fingers' slide changes over a flexion cycle of a few seconds.
 TIME_CONSTANT_S = 2.0
-# The model's own value counts as this much evidence (a frame gives tr(S^-1 B) of up to ~3 for
-# the slide; the pixels' scoring step weighs a frame by tr(S^-1 B S^-1 B), tens to hundreds).
+# The model's own value counts as this much evidence (a frame gives tr(S^-1 B) of up to ~3).
 PRIOR_WEIGHT = 3.0
 # Guard rails on the slide's sigma, as a factor on the model's: a tenth (no slide is ever
 # ruled out) to twice it.
 SD_FACTOR_RANGE = (0.1, 2.0)
-MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide or the pixels from the pose
+MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide from the pose
 # Frames scored: at most one per this interval. Scoring costs about ten compiled tracker steps
 # (an unscented transform and the noise model in NumPy), and the noise changes over seconds
 # (a flexion cycle, the light), not from frame to frame.
 SCORE_INTERVAL_S = 0.25
 
 
-class FrameScores(NamedTuple):
-    """One frame's ``component_scores`` for each component, B at its model value
-    (``VarianceFactor.update`` takes them so); ``slide`` None where no slide is modelled."""
-
-    slide: tuple[float, float, float] | None
-    pixel: tuple[float, float, float]
-
-
 def component_scores(
     residual: np.ndarray, R: np.ndarray, HPH: np.ndarray, B: np.ndarray
-) -> tuple[float, float, float]:
-    """(nu^T S^-1 B S^-1 nu, tr(S^-1 B), tr(S^-1 B S^-1 B)) of one update from its posterior:
+) -> tuple[float, float]:
+    """(nu^T S^-1 B S^-1 nu, tr(S^-1 B)) of one update from its posterior:
     ``residual`` (m,) y - h(x+), ``R`` (m, m) the measurement noise it was updated with, ``HPH``
     (m, m) the posterior's spread in the measurements (H P+ H^T), ``B`` (m, m) the component's
     covariance."""
     Ri = np.linalg.inv(R)
     a = Ri @ residual
     SiB = (Ri - Ri @ HPH @ Ri) @ B
-    return float(a @ B @ a), float(np.trace(SiB)), float(np.sum(SiB * SiB.T))
+    return float(a @ B @ a), float(np.trace(SiB))
 
 
-def frame_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, det,
-                 params: ukf.UKFParams, slide_factor: float,
-                 model_pixel_sigma: float) -> FrameScores | None:
-    """``component_scores`` of a frame's markers update for the skin slide and the blobs' pixel
-    noise: the posterior (x, P) of state model ``model``, the MarkerObservation ``obs`` it used
-    (its slide at ``slide_factor`` times the model's variance, its pixel sigma whatever it is),
-    the blobs ``det`` labelled ``labels``; each B at its model value (the slide's, and
-    ``model_pixel_sigma``). None where the frame cannot tell: fewer than MIN_MARKERS markers, a
-    marker given several blobs (the paper's association). Suspect blobs are left out
-    (:func:`undoubted`)."""
+def slide_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, det,
+                 params: ukf.UKFParams, slide_factor: float) -> tuple[float, float] | None:
+    """``component_scores`` of a frame's markers update for the skin slide: the posterior
+    (x, P) of state model ``model``, the MarkerObservation ``obs`` it used (its slide at
+    ``slide_factor`` times the model's variance), the blobs ``det`` labelled ``labels``; B at
+    the slide's model value. None where the frame cannot tell: no slide modelled, fewer than
+    MIN_MARKERS markers, a marker given several blobs (the paper's association). Suspect blobs
+    are left out (:func:`undoubted`)."""
     labels = undoubted(labels, det)
     taken = labels[labels >= 0]
-    if np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
+    if not obs.slide.any() or np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
         return None
     z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
     rows, values = stacked_rows(labels, z, obs.k)
@@ -104,14 +91,9 @@ def frame_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
     y_hat = obs(x[None])[0]
     R = obs.noise_covariance(x, y_hat)[np.ix_(rows, rows)]
     residual, HPH = values - y_hat[rows], pred.Pyy[np.ix_(rows, rows)]
-    pixel_rows = (rows % obs.k) < 2
-    B_pixel = np.diag(np.where(pixel_rows, model_pixel_sigma**2, 0.0))
+    G = obs.slide_jacobian(x)[rows]
     try:
-        slide = None
-        if obs.slide.any():
-            G = obs.slide_jacobian(x)[rows]
-            slide = component_scores(residual, R, HPH, G @ G.T / slide_factor)
-        return FrameScores(slide, component_scores(residual, R, HPH, B_pixel))
+        return component_scores(residual, R, HPH, G @ G.T / slide_factor)
     except np.linalg.LinAlgError:
         return None
 
@@ -143,36 +125,22 @@ class VarianceFactor:
     def sd_factor(self) -> float:
         return math.sqrt(self.factor)
 
-    def update(self, scores: tuple[float, float, float] | None, elapsed: float,
-               used: float | None = None) -> bool:
+    def update(self, scores: tuple[float, float] | None, elapsed: float) -> bool:
         """Fold in one scored frame's ``component_scores`` (B at the model value), ``elapsed`` s
         after the previous frame scored; whether they were taken (None, non-finite or
-        uninformative scores are not). ``used``: the filter took the component at this factor,
-        not the one learned (a bound on what it takes), and a scoring step from there replaces
-        the EM step, whose fixed point is only right where the two agree:
-        lambda = u + sum (num - den) / sum tr(S^-1 B S^-1 B), the moment estimate at u."""
+        uninformative scores are not): the fixed point of lambda * num / den, each frame's at
+        its lambda."""
         self._since += max(elapsed, 0.0)
         if scores is None or not (np.isfinite(scores).all() and scores[1] > 0):
             return False
-        if used is not None and not scores[2] > 0:
-            return False
         keep = math.exp(-self._since / self.time_constant) if math.isfinite(self._since) else 1.0
         self._since = 0.0
-        num, den, curvature = scores
-        if used is None:  # the fixed point of lambda * num / den, each frame's at its lambda
-            self._num = keep * self._num + self.factor * num
-            self._den = keep * self._den + den
-        else:
-            self._num = keep * self._num + used * curvature + num - den
-            self._den = keep * self._den + curvature
+        num, den = scores
+        self._num = keep * self._num + self.factor * num
+        self._den = keep * self._den + den
         lo, hi = self.factor_range
         self.factor = min(max(self._num / self._den, lo), hi)
         return True
-
-
-# The blobs' per-frame pixel variance as a factor on the model's: down to (0.03 sigma)^2 and up
-# to twice the sigma (tracking/pixel_noise.py bounds what the filter takes).
-PIXEL_FACTOR_RANGE = (1e-3, 4.0)
 
 
 @dataclass
@@ -181,14 +149,13 @@ class LearnedNoise:
     pixel sigma (module doc; tracking/pixel_noise.py)."""
 
     slide: VarianceFactor = field(default_factory=VarianceFactor)
-    pixel: VarianceFactor = field(
-        default_factory=lambda: VarianceFactor(factor_range=PIXEL_FACTOR_RANGE))
+    spread: pixel_noise.BlobSpread = field(default_factory=pixel_noise.BlobSpread)
     correlation: pixel_noise.BlobCorrelation = field(default_factory=pixel_noise.BlobCorrelation)
     pixel_sigma: float | None = None  # what the filter takes (None: the model's)
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
-    # the open window of frames for the correlation: (x, labels, uv) each, the observation
-    # they were tracked with and the time they span
+    # the open window of frames for the blob errors: (x, each marker's blob, uv) each, the
+    # observation they were tracked with and the time they span
     _window: list = field(default_factory=list)
     _window_obs: object = None
     _window_span: float = 0.0
@@ -200,37 +167,27 @@ class LearnedNoise:
         ``det`` labelled ``labels``, ``dt`` after the last frame) with the model's ``noise``,
         learning the slide and/or the pixel sigma; whether what the filter should take
         changed. Suspect blobs are left out (:func:`undoubted`)."""
-        if pixel:
-            self._add_frame(obs, x, labels, det, dt)
+        changed = pixel and self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
         self._since += max(dt, 0.0)
-        if self._since < self.interval or not (slide or pixel):
-            return False
-        scores = frame_scores(model, obs, x, P, labels, det, params, self.slide.factor,
-                              noise.pixel_sigma)
+        if self._since < self.interval or not slide:
+            return changed
+        scores = slide_scores(model, obs, x, P, labels, det, params, self.slide.factor)
         if scores is None:
-            return False  # the frame stays due
+            return changed  # the frame stays due
         elapsed, self._since = self._since, 0.0
-        changed = slide and self.slide.update(scores.slide, elapsed)
-        if pixel:
-            used = (obs.noise.pixel_sigma / noise.pixel_sigma) ** 2
-            if self.pixel.update(scores.pixel, elapsed, used):
-                inflation = self.correlation.inflation
-                if inflation is None:  # not measured yet: the most it can be
-                    inflation = self._worst_inflation()
-                self.pixel_sigma = pixel_noise.filter_sigma(
-                    noise.pixel_sigma, self.pixel.factor, inflation)
-                changed = True
-        return changed
+        return self.slide.update(scores, elapsed) or changed
 
     def describe(self, noise: MeasurementNoise) -> dict[str, float | None]:
         """What was learned against the model's ``noise``, for summary.json: the pixel sigma
-        the filter took last and the model's, the blob errors' inflation by their correlation
-        in time (None: not measured), the skin slide's sigma as a factor on the model's."""
-        inflation = self.correlation.inflation
+        the filter took last and the model's, the blob errors' rms per frame and their
+        inflation by their correlation in time (None: not measured), the skin slide's sigma as
+        a factor on the model's."""
+        variance = self.spread.variance
         return {
             "pixel_sigma_px": self.pixel_sigma or noise.pixel_sigma,
             "pixel_sigma_model_px": noise.pixel_sigma,
-            "blob_error_inflation": inflation,
+            "blob_error_px": None if variance is None else math.sqrt(variance),
+            "blob_error_inflation": self.correlation.inflation,
             "skin_slide_sd_factor": self.slide.sd_factor,
         }
 
@@ -250,21 +207,34 @@ class LearnedNoise:
             return None
         return pixel_noise.worst_inflation(self._window_span / (len(self._window) - 1))
 
-    def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, det, dt: float) -> None:
-        """Keep one frame for the correlation; measure the window once it spans WINDOW_S. A new
-        observation (W0 or the layout changed) starts a new window."""
+    def _add_frame(self, obs, x: np.ndarray, labels: np.ndarray, det, dt: float,
+                   model_sigma: float) -> bool:
+        """Keep one frame for the blob errors; measure the window once it spans WINDOW_S and
+        take the sigma it gives (whether it changed). A new observation (W0 or the layout
+        changed) starts a new window."""
         if obs is not self._window_obs:
             self._window, self._window_obs = [], obs
         self._window_span = self._window_span + max(dt, 0.0) if self._window else 0.0
-        self._window.append((x, undoubted(labels, det), det.uv))
+        labels = undoubted(labels, det)
+        blob_of = np.full(obs.n_markers, -1)
+        blobs = np.flatnonzero(labels >= 0)
+        blob_of[labels[blobs]] = blobs
+        self._window.append((x, blob_of, det.uv))
         if not pixel_noise.window_full(self._window_span):
-            return
-        # the window's predicted pixels in one call: per frame the step stays ~1 us
+            return False
+        # the whole window in one batch: per frame the step stays ~1 us
         X = np.stack([frame[0] for frame in self._window])
-        y = obs(X).reshape(len(X), obs.n_markers, obs.k)[..., :2]
-        residuals = np.full(y.shape, np.nan)
-        for i, (_, frame_labels, frame_uv) in enumerate(self._window):
-            blobs = np.flatnonzero(frame_labels >= 0)
-            residuals[i, frame_labels[blobs]] = frame_uv[blobs] - y[i, frame_labels[blobs]]
+        uv = np.zeros((len(X), max(1, max(len(f[2]) for f in self._window)), 2))
+        for i, (_, _, frame_uv) in enumerate(self._window):
+            uv[i, :len(frame_uv)] = frame_uv
+        residuals, dof = pixel_noise.fit_residuals(
+            obs, X, np.stack([frame[1] for frame in self._window]), uv)
+        self.spread.add(residuals, dof, self._window_span)
         self.correlation.add(residuals, self._window_span)
         self._window = []
+        inflation = self.correlation.inflation
+        if inflation is None:  # not measured yet: the most it can be
+            inflation = self._worst_inflation()
+        sigma = pixel_noise.filter_sigma(model_sigma, self.spread.variance, inflation)
+        changed, self.pixel_sigma = sigma != self.pixel_sigma, sigma
+        return changed

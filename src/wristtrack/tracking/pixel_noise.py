@@ -2,35 +2,37 @@
 
 ``MeasurementNoise.pixel_sigma``, 0.3 px, covers the worst of blur, compression and highlights
 together; sharp blobs are good to 0.015 px (detect/blobs.py), and the filter that takes them
-at 0.3 px leaves most of what their pixels say about the out-of-plane angles to depth. Where
-depth is poor that costs most: structured-light depth at 0.56 deg against 0.28 clean
-(docs/BENCHMARKS.md at 1869a59), 0.43 with the pixels taken at 0.15 px throughout.
+at 0.3 px leaves most of what their pixels say about the out-of-plane angles to depth.
 
-Variance-component estimation (tracking/noise_scale.py) measures the blob centres' noise frame
-by frame: 0.03-0.05 px on sharp rendered blobs (0.037 against the truth), 0.14 under H.264 (0.13),
-with the plain weighted centroid the detector had then. The filter cannot take that figure as
-it is: the blob errors are correlated in time (the pixel grid, the codec's blocks and the blur
-change slowly while the hand moves slowly), and the filter, which weighs about half a second of
-frames, meets them larger than one frame's noise.
-Against the truth, on the rendered recordings, the variance of half-second means of a blob's
-error is 4-6x what white noise of its per-frame spread would give. So the sigma is the
-white-noise equivalent over WINDOW_S: the per-frame variance times the inflation that windows
-of the posterior residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of
-frames for a constant), measured as the track goes (``BlobCorrelation``; 5.3-6.7 on the
-rendered recordings, against 4.2-6.3 from the truth). Until MIN_WINDOWS windows are measured
-the inflation is taken at the most it can be, errors constant over a window
-(:func:`worst_inflation`, the number of frames a window holds): the per-frame noise, learned
-within a second, then already lowers the sigma of sharp blobs, where waiting for the
-correlation kept the model's 0.3 px over the first ~2.3 s (structured light 0.483 -> 0.464 deg
-on the rendered recordings, 3 seeds; the others within +-0.01).
+The blobs' errors are measured frame by frame, on the blobs alone: each tracked frame's
+labelled blobs against the markers at the filter's pose, less the rigid motion and the common
+skin slide of the MCP markers that fit them best (:func:`fit_residuals`, linearised at the
+pose; 2n - 9 degrees of freedom for n markers, 2n - 6 without the slide). What is left is the
+blobs' own scatter around one rigid hand: on the rendered recordings (3 seeds) 0.012 px rms
+against 0.015 from the truth (clean, structured light), 0.033 against 0.035 (Bayer), 0.095-0.146
+against 0.108-0.115 (H.264); less under JPEG (0.045-0.050 against 0.058-0.061), whose blocks
+shift all blobs alike, a shift the pose takes and the orientation hardly feels. The filter's
+posterior residuals, which this replaced, also hold its own lag: on colour alone they kept the
+learned sigma at the model's 0.3 px, and the lag that caused kept them there (0.35 deg, where
+0.05 px gave 0.20).
 
-It is kept within ``SIGMA_FLOOR`` and the model's sigma. Below the floor the errors the
-residuals cannot show dominate: blob errors along the pose's own patterns (all blobs shifted
-alike, as JPEG's blocks do) are taken up by the pose and never show. With the sigma fixed, the
-rendered clean recordings came out at 0.30 deg at 0.1 px, 0.27 at 0.15, 0.28 at 0.3 (3 seeds).
-Above the model's, what the residuals show is mostly the layout's error (without hand.json, a
-constant per marker), which is no noise: raising the sigma for it made the every-effect
-recordings worse.
+The blob errors are correlated in time (the pixel grid, the codec's blocks and the blur change
+slowly while the hand moves slowly), and the filter, which weighs about half a second of
+frames, meets them larger than one frame's noise. So the sigma is the white-noise equivalent
+over WINDOW_S: the per-frame variance (``BlobSpread``) times the inflation that windows of the
+residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of frames for a
+constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from the truth), times
+MARGIN. Until MIN_WINDOWS windows are measured the inflation is taken at the most it can be,
+errors constant over a window (:func:`worst_inflation`, the number of frames a window holds).
+
+MARGIN: with the sigma fixed, the rendered recordings came out best at about twice the blobs'
+white-noise equivalent (clean and structured light at 0.05 px or below for 0.027, Bayer at 0.1
+for 0.07, JPEG at 0.15-0.2 for 0.10; 3 seeds each); 1.5 did better than 2.0 on all seven
+conditions compared (clean 0.175 -> 0.163 deg, structured light 0.343 -> 0.305).
+
+The sigma is kept within ``SIGMA_FLOOR`` and the model's. Above the model's, what the residuals
+show is mostly the layout's error (without hand.json, a constant per marker), which is no noise:
+raising the sigma for it made the every-effect recordings worse.
 
 All of this is learned from, and taken for, the blobs the detector does not doubt. A suspect
 blob (clipped, split, elongated, on the border, a streak: ``Detections.suspect``) is taken at the
@@ -47,13 +49,16 @@ import numpy as np
 WINDOW_S = 0.5  # the span of frames whose errors the filter weighs together
 _SPAN_TOLERANCE = 1e-6  # s: 15 x 1/30 s sums to 0.5 - 6e-17, which closes a window
 TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
+SPREAD_TIME_CONSTANT_S = 2.0  # memory of the per-frame spread: the light and the blur change
 MIN_WINDOWS = 4  # windows measured before the inflation is (the worst case until then)
-SIGMA_FLOOR = 0.15  # px
+MARGIN = 1.5  # the sigma taken, on the blobs' white-noise equivalent (module doc)
+SIGMA_FLOOR = 0.05  # px
+_RANK_TOLERANCE = 1e-9  # of the largest singular value: a direction the markers cannot show
 
 
 class BlobCorrelation:
     """The inflation of the blobs' error variance over WINDOW_S by its correlation in time,
-    from the markers' posterior pixel residuals, one window of frames at a time (module doc)."""
+    from the frames' fit residuals, one window of frames at a time (module doc)."""
 
     def __init__(self) -> None:
         self._num = self._den = 0.0  # forgetting sums of (sum_w e)^2 and sum_w e^2
@@ -78,6 +83,78 @@ class BlobCorrelation:
         return max(self._num / self._den, 1.0)
 
 
+class BlobSpread:
+    """The blobs' per-frame error variance (px^2 per coordinate): the frames' squared fit
+    residuals over their degrees of freedom, forgetting old windows (SPREAD_TIME_CONSTANT_S)."""
+
+    def __init__(self) -> None:
+        self._num = self._den = 0.0
+
+    def add(self, residuals: np.ndarray, dof: np.ndarray, span: float) -> None:
+        """One window's residuals (frames, markers, 2), NaN where not measured, and each
+        frame's degrees of freedom (frames,), spanning ``span`` seconds."""
+        keep = math.exp(-span / SPREAD_TIME_CONSTANT_S)
+        self._num = keep * self._num + float(np.nansum(residuals**2))
+        self._den = keep * self._den + float(np.sum(dof))
+
+    @property
+    def variance(self) -> float | None:
+        """The variance so far, or None before a frame has shown any."""
+        return self._num / self._den if self._den > 0 else None
+
+
+def fit_residuals(obs, X: np.ndarray, labels: np.ndarray,
+                  uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's blob residuals after its best rigid motion and common skin slide.
+
+    ``obs`` the MarkerObservation the frames were tracked with, ``X`` (F, D) their posterior
+    states, ``labels`` (F, J) the blob of each marker (-1: none) and ``uv`` (F, M, 2) the
+    blobs (M the most blobs of any frame). Returns the residuals (F, J, 2), NaN for markers
+    without a blob, and each frame's degrees of freedom (F,): 2n less the rank of the motion
+    and the slide at n markers (0 where n < 4: too few to tell noise from the pose). The
+    least-squares fit is linearised at the frame's pose (the blobs are within a pixel of it);
+    the slide's pattern is the last frame's, which half a second hardly changes.
+    """
+    F, J = labels.shape
+    y = obs(X).reshape(F, J, obs.k)[..., :2]
+    seen = labels >= 0
+    frames = np.arange(F)[:, None]
+    r = np.where(seen[..., None], uv[frames, np.maximum(labels, 0)] - y, 0.0)
+    A = np.concatenate((_motion_jacobian(obs, X), _slide_columns(obs, X[-1], F)), axis=3)
+    A = np.where(seen[..., None, None], A, 0.0).reshape(F, 2 * J, -1)
+    r = r.reshape(F, 2 * J)
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    rank = s > _RANK_TOLERANCE * s[:, :1]
+    U = U * rank[:, None, :]
+    e = r - np.einsum("fij,fkj,fk->fi", U, U, r)
+    dof = 2 * seen.sum(axis=1) - rank.sum(axis=1)
+    dof = np.where(seen.sum(axis=1) >= 4, dof, 0)
+    e = np.where((seen & (dof > 0)[:, None])[..., None], e.reshape(F, J, 2), np.nan)
+    return e, dof
+
+
+def _motion_jacobian(obs, X: np.ndarray) -> np.ndarray:
+    """(F, J, 2, 6) change of the markers' pixels per small rotation and translation of the
+    hand in the camera frame (pinhole: distortion hardly turns these directions)."""
+    pts = obs.marker_points(X)  # (F, J, 3)
+    x, y, z = pts[..., 0], pts[..., 1], pts[..., 2]
+    fx, fy = obs.camera.fx, obs.camera.fy
+    zero = np.zeros_like(z)
+    proj = np.stack((np.stack((fx / z, zero, -fx * x / z**2), axis=-1),
+                     np.stack((zero, fy / z, -fy * y / z**2), axis=-1)), axis=-2)  # (F,J,2,3)
+    cross = np.stack((np.stack((zero, z, -y), axis=-1), np.stack((-z, zero, x), axis=-1),
+                      np.stack((y, -x, zero), axis=-1)), axis=-2)  # d(w x p)/dw = -[p]x
+    return np.concatenate((proj @ cross, proj), axis=-1)
+
+
+def _slide_columns(obs, x: np.ndarray, frames: int) -> np.ndarray:
+    """(frames, J, 2, 3) the skin slide's pixel pattern at state ``x`` (none: (frames, J, 2, 0))."""
+    if not obs.slide.any():
+        return np.zeros((frames, obs.n_markers, 2, 0))
+    G = obs.slide_jacobian(x).reshape(obs.n_markers, obs.k, 3)[:, :2, :]
+    return np.broadcast_to(G, (frames, *G.shape))
+
+
 def window_full(span: float) -> bool:
     """Whether a window of frames spanning ``span`` s (first frame to last) is complete."""
     return span >= WINDOW_S - _SPAN_TOLERANCE
@@ -92,12 +169,12 @@ def worst_inflation(frame_interval: float) -> float | None:
     return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
 
 
-def filter_sigma(model_sigma: float, frame_factor: float, inflation: float | None) -> float:
-    """The pixel sigma the filter takes: the model's ``model_sigma`` scaled by the per-frame
-    variance factor learned (``frame_factor``) and the correlation's ``inflation`` (measured, or
-    :func:`worst_inflation`), within [SIGMA_FLOOR, model_sigma]; the model's where there is
-    no inflation to take."""
-    if inflation is None:
+def filter_sigma(model_sigma: float, variance: float | None, inflation: float | None) -> float:
+    """The pixel sigma the filter takes: MARGIN times the white-noise equivalent of the blobs'
+    per-frame ``variance`` (px^2) under the correlation's ``inflation`` (measured, or
+    :func:`worst_inflation`), within [SIGMA_FLOOR, model_sigma]; the model's where either is
+    not known yet."""
+    if inflation is None or variance is None:
         return model_sigma
-    sigma = model_sigma * math.sqrt(frame_factor * inflation)
+    sigma = MARGIN * math.sqrt(variance * inflation)
     return min(max(sigma, min(SIGMA_FLOOR, model_sigma)), model_sigma)
