@@ -147,7 +147,7 @@ def test_fit_residuals_measure_the_blobs_scatter_about_a_rigid_hand(slide):
     np.testing.assert_array_equal(dof, expected)
     assert np.isnan(residuals[::3, 4]).all() and np.isfinite(residuals[1::3]).all()
     spread = pixel_noise.BlobSpread()
-    spread.add(residuals, dof, 1.0)
+    spread.add(residuals, dof, np.zeros(F), 1.0)  # a still hand: all of it at rest
     assert np.sqrt(spread.variance) == pytest.approx(0.04, rel=0.06)
     # three markers say nothing: no residuals, no degrees of freedom
     few = labels.copy()
@@ -259,3 +259,48 @@ def test_blobs_as_noisy_as_the_model_keep_its_sigma():
 def test_the_floor_is_below_the_model():
     assert SIGMA_FLOOR < TrackerConfig().measurement.pixel_sigma
     assert pixel_noise.TIME_CONSTANT_S > MIN_WINDOWS * WINDOW_S
+
+
+def test_the_spread_grows_with_the_image_speed_as_the_frames_show():
+    """Residuals drawn with variance a + b s^2 per coordinate (a long shutter's blur grows with
+    the image speed s): the weighted regression gives a and b back; frames that never move
+    give all of it to a, and a spread that only grows with speed gives a = 0."""
+    rng = np.random.default_rng(5)
+    a, b = 0.012**2, (0.09**2 - 0.012**2) / 250.0**2  # 0.09 px at 250 px/s
+    speed2 = rng.uniform(0, 300, (40, 16)) ** 2
+    spread = pixel_noise.BlobSpread()
+    for window in speed2:
+        e = rng.normal(size=(16, 6, 2)) * np.sqrt(a + b * window)[:, None, None]
+        spread.add(e, np.full(16, 12), window, 1e-3)  # 12: no fit took any; a long memory
+    got_a, got_b = spread.coefficients
+    assert got_a == pytest.approx(a, rel=0.3) and got_b == pytest.approx(b, rel=0.1)
+    assert spread.variance == got_a
+    still = pixel_noise.BlobSpread()
+    still.add(rng.normal(size=(16, 6, 2)) * 0.02, np.full(16, 12), np.zeros(16), WINDOW_S)
+    assert still.coefficients[1] == 0.0 and np.sqrt(still.variance) == pytest.approx(0.02, rel=0.1)
+    smeared = pixel_noise.BlobSpread()
+    s2 = np.linspace(1e4, 9e4, 16)
+    blur = rng.normal(size=(16, 6, 2)) * np.sqrt(1e-6 * s2)[:, None, None]
+    smeared.add(blur, np.full(16, 12), s2, WINDOW_S)
+    at_rest, per_speed2 = smeared.coefficients
+    assert at_rest < 0.05 * 1e-6 * s2.mean() and per_speed2 == pytest.approx(1e-6, rel=0.2)
+    assert pixel_noise.BlobSpread().coefficients is None
+
+
+def test_the_blur_share_is_taken_at_the_frames_speed_up_to_the_model():
+    assert pixel_noise.motion_variance(1e-7, 0.0, 3.0) == 0.0  # a still frame
+    assert pixel_noise.motion_variance(1e-7, 200.0**2, 3.0) == pytest.approx(
+        MARGIN**2 * 3.0 * 1e-7 * 200.0**2)
+    assert pixel_noise.motion_variance(1e-7, 200.0**2, None) == 0.0  # nothing measured yet
+    obs, _ = _observation()
+    obs.set_pixel_sigma(0.05)
+    learned = noise_scale.LearnedNoise()
+    s2 = np.linspace(0, 1e6, 16)  # residuals of 0.01 px at rest, growing with the speed
+    learned.spread.add(np.ones((16, 6, 2)) * np.sqrt(1e-4 + 1e-9 * s2)[:, None, None],
+                       np.full(16, 12), s2, 0.5)
+    learned.correlation.frames = 16  # the worst case until measured
+    learned.speed2 = 1e8  # far beyond what the model's sigma allows
+    learned.apply(obs)
+    assert obs.motion_variance == pytest.approx(0.3**2 - 0.05**2)
+    np.testing.assert_allclose(obs.blob_variance(np.array([False, True]), 2),
+                               [obs.motion_variance, obs.motion_variance + obs.suspect_variance])

@@ -154,8 +154,10 @@ class LearnedNoise:
     pixel_sigma: float | None = None  # what the filter takes (None: the model's)
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
-    # the open window of frames for the blob errors: (x, each marker's blob, uv) each, the
-    # observation they were tracked with and the time they span
+    speed2: float = 0.0  # the markers' squared image speed at the last frame, (px/s)^2
+    _last_pixels: np.ndarray | None = None  # the markers' pixels at the last frame's state
+    # the open window of frames for the blob errors: (x, each marker's blob, uv, speed2) each,
+    # the observation they were tracked with and the time they span
     _window: list = field(default_factory=list)
     _window_obs: object = None
     _window_span: float = 0.0
@@ -167,6 +169,8 @@ class LearnedNoise:
         ``det`` labelled ``labels``, ``dt`` after the last frame) with the model's ``noise``,
         learning the slide and/or the pixel sigma; whether what the filter should take
         changed. Suspect blobs are left out (:func:`undoubted`)."""
+        if pixel:
+            self._follow_speed(obs, x, dt)
         changed = pixel and self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not slide:
@@ -179,23 +183,39 @@ class LearnedNoise:
 
     def describe(self, noise: MeasurementNoise) -> dict[str, float | None]:
         """What was learned against the model's ``noise``, for summary.json: the pixel sigma
-        the filter took last and the model's, the blob errors' rms per frame and their
-        inflation by their correlation in time (None: not measured), the skin slide's sigma as
-        a factor on the model's."""
-        variance = self.spread.variance
+        the filter took last and the model's, the blob errors' rms per frame at rest and its
+        growth with the image speed (px per px/s), their inflation by their correlation in time
+        (None: not measured), the skin slide's sigma as a factor on the model's."""
+        a, b = self.spread.coefficients or (None, None)
         return {
             "pixel_sigma_px": self.pixel_sigma or noise.pixel_sigma,
             "pixel_sigma_model_px": noise.pixel_sigma,
-            "blob_error_px": None if variance is None else math.sqrt(variance),
+            "blob_error_px": None if a is None else math.sqrt(a),
+            "blob_blur_px_per_px_s": None if b is None else math.sqrt(b),
             "blob_error_inflation": self.correlation.inflation,
             "skin_slide_sd_factor": self.slide.sd_factor,
         }
 
     def apply(self, obs) -> None:
-        """Give the MarkerObservation ``obs`` the slide and the pixel sigma learned so far."""
+        """Give the MarkerObservation ``obs`` the slide and the pixel sigma learned so far, and
+        the blur's share at the last frame's speed (up to the model's sigma)."""
         obs.scale_slide(self.slide.sd_factor)
         if self.pixel_sigma is not None:
             obs.set_pixel_sigma(self.pixel_sigma)
+        coefficients = self.spread.coefficients
+        blur = 0.0
+        if coefficients is not None:
+            inflation = self.correlation.inflation or self._worst_inflation()
+            blur = pixel_noise.motion_variance(coefficients[1], self.speed2, inflation)
+        obs.motion_variance = min(blur, obs.suspect_variance)
+
+    def _follow_speed(self, obs, x: np.ndarray, dt: float) -> None:
+        """The markers' squared image speed (px/s)^2 from the last frame's state to this one's
+        (0 at a new observation or without a frame interval)."""
+        pixels = obs(x[None]).reshape(obs.n_markers, obs.k)[:, :2]
+        last, self._last_pixels = self._last_pixels, pixels
+        fresh = obs is not self._window_obs or last is None or not dt > 0
+        self.speed2 = 0.0 if fresh else float(np.mean(np.sum((pixels - last) ** 2, axis=1))) / dt**2
 
     def _worst_inflation(self) -> float | None:
         """The inflation of errors constant over a window (pixel_noise.worst_inflation): the
@@ -219,17 +239,18 @@ class LearnedNoise:
         blob_of = np.full(obs.n_markers, -1)
         blobs = np.flatnonzero(labels >= 0)
         blob_of[labels[blobs]] = blobs
-        self._window.append((x, blob_of, det.uv))
+        self._window.append((x, blob_of, det.uv, self.speed2))
         if not pixel_noise.window_full(self._window_span):
             return False
         # the whole window in one batch: per frame the step stays ~1 us
         X = np.stack([frame[0] for frame in self._window])
         uv = np.zeros((len(X), max(1, max(len(f[2]) for f in self._window)), 2))
-        for i, (_, _, frame_uv) in enumerate(self._window):
-            uv[i, :len(frame_uv)] = frame_uv
+        for i, frame in enumerate(self._window):
+            uv[i, :len(frame[2])] = frame[2]
         residuals, dof = pixel_noise.fit_residuals(
             obs, X, np.stack([frame[1] for frame in self._window]), uv)
-        self.spread.add(residuals, dof, self._window_span)
+        speed2 = np.array([frame[3] for frame in self._window])
+        self.spread.add(residuals, dof, speed2, self._window_span)
         self.correlation.add(residuals, self._window_span)
         self._window = []
         inflation = self.correlation.inflation

@@ -109,6 +109,7 @@ class MarkerObservation:
         self.k = 3 if use_depth else 2
         self.noise = noise
         self.model_pixel_sigma = noise.pixel_sigma  # what a suspect blob is taken at
+        self.motion_variance = 0.0  # px^2 every blob adds this frame: its blur (pixel_noise.py)
         # (J, 3) hand-frame spread of each marker's share in the common skin slide: the
         # model's (slide_base), scaled by what the recording shows (tracking/noise_scale.py)
         self.slide_base = np.zeros((self.n_markers, 3))
@@ -135,11 +136,12 @@ class MarkerObservation:
         return max(self.model_pixel_sigma**2 - self.noise.pixel_sigma**2, 0.0)
 
     def blob_variance(self, suspect: np.ndarray | None, count: int) -> np.ndarray:
-        """(count,) the pixel variance each blob adds to its marker's in the update: the
-        suspect ones' ``suspect_variance``, the others' none."""
-        if suspect is None:
-            return np.zeros(count)
-        return np.where(suspect, self.suspect_variance, 0.0)
+        """(count,) the pixel variance each blob adds to its marker's in the update: the blur's
+        ``motion_variance``, and the suspect ones' ``suspect_variance`` on top."""
+        variance = np.full(count, self.motion_variance)
+        if suspect is not None:
+            variance += np.where(suspect, self.suspect_variance, 0.0)
+        return variance
 
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""
@@ -248,9 +250,8 @@ def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, 
     r = r[order][first].ravel()
     rows = (markers[:, None] * k + np.arange(2)).ravel()
     R = obs.noise_covariance(x, y)[np.ix_(rows, rows)]
-    if suspect is not None:
-        nearest = blobs[order][first]
-        R[np.diag_indices_from(R)] += obs.suspect_variance * np.repeat(suspect[nearest], 2)
+    R[np.diag_indices_from(R)] += np.repeat(obs.blob_variance(suspect, len(uv))[
+        blobs[order][first]], 2)
     return float(r @ np.linalg.solve(R, r)) <= limit
 
 
@@ -263,17 +264,10 @@ def stacked_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray,
     return rows[ok], values[ok]
 
 
-def suspect_rows(labels: np.ndarray, z: np.ndarray, k: int, suspect: np.ndarray) -> np.ndarray:
-    """For each of ``stacked_rows``' rows, whether it is a pixel row of a suspect blob."""
-    blobs = np.flatnonzero(labels >= 0)
-    doubted = suspect[blobs, None] & (np.arange(k) < 2)
-    return doubted[np.isfinite(z[blobs])]
-
-
 def update_noise(obs: MarkerObservation, R: np.ndarray, labels: np.ndarray, z: np.ndarray,
                  suspect: np.ndarray | None) -> np.ndarray:
     """The update's measurement noise: ``R`` (``stacked_rows``' rows of the full noise) with
-    each suspect blob's pixel rows raised by ``obs.suspect_variance``."""
-    if suspect is None or not obs.suspect_variance:
-        return R
-    return R + np.diag(obs.suspect_variance * suspect_rows(labels, z, obs.k, suspect))
+    each blob's pixel rows raised by its ``obs.blob_variance``."""
+    blobs = np.flatnonzero(labels >= 0)
+    added = obs.blob_variance(suspect, len(labels))[blobs, None] * (np.arange(obs.k) < 2)
+    return R + np.diag(added[np.isfinite(z[blobs])])

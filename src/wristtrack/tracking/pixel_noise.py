@@ -25,6 +25,14 @@ constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from 
 MARGIN. Until MIN_WINDOWS windows are measured the inflation is taken at the most it can be,
 errors constant over a window (:func:`worst_inflation`, the number of frames a window holds).
 
+A long shutter smears the blobs of the fast frames: under a 1/30-1/40 s shutter the scatter was
+0.014 px below 2 px/frame of image speed, 0.024 at 2-5 and 0.091 at 5-10 (rendered, seed 0),
+where the clean recording's stayed at 0.012-0.017. So the per-frame variance is a + b s^2, s
+the markers' image speed (``BlobSpread``): the filter takes a (within the bounds below) for
+every blob, and each frame adds MARGIN^2 x inflation x b s^2 at the frame's speed
+(:func:`motion_variance`), up to the model's sigma. With the average alone the shutter cost
+0.24 -> 0.29 deg; with the speed 0.20.
+
 MARGIN: with the sigma fixed, the rendered recordings came out best at about twice the blobs'
 white-noise equivalent (clean and structured light at 0.05 px or below for 0.027, Bayer at 0.1
 for 0.07, JPEG at 0.15-0.2 for 0.10; 3 seeds each); 1.5 did better than 2.0 on all seven
@@ -54,6 +62,8 @@ MIN_WINDOWS = 4  # windows measured before the inflation is (the worst case unti
 MARGIN = 1.5  # the sigma taken, on the blobs' white-noise equivalent (module doc)
 SIGMA_FLOOR = 0.05  # px
 _RANK_TOLERANCE = 1e-9  # of the largest singular value: a direction the markers cannot show
+# The least variance a frame is weighted at (px^2): finer than any blob's scatter (sharp: 0.012 px)
+_SPREAD_FLOOR = 0.005**2
 
 
 class BlobCorrelation:
@@ -84,23 +94,55 @@ class BlobCorrelation:
 
 
 class BlobSpread:
-    """The blobs' per-frame error variance (px^2 per coordinate): the frames' squared fit
-    residuals over their degrees of freedom, forgetting old windows (SPREAD_TIME_CONSTANT_S)."""
+    """The blobs' per-frame error variance (px^2 per coordinate) as a + b s^2, s the markers'
+    image speed (px/s): the frames' squared fit residuals regressed on the frames' speed, a and b
+    kept >= 0, forgetting old windows (SPREAD_TIME_CONSTANT_S). ``b`` is the blur of a long
+    shutter: the fast frames' blobs are smeared, and their spread would not show in an average
+    the slow frames dominate (module doc).
+
+    A frame's sum of squares E over d degrees of freedom has mean d v and variance 2 d v^2 at
+    variance v = a + b s^2, so the least squares are weighted by 1 / (d v^2), v at the estimate
+    so far (one reweighting step per window; unweighted, a fast frame's large scatter swamped a:
+    a 0.05-1.9x its truth where the blur dominates)."""
 
     def __init__(self) -> None:
-        self._num = self._den = 0.0
+        # forgetting sums of d/v^2, d s^2/v^2, d s^4/v^2, E/v^2, E s^2/v^2
+        self._sums = np.zeros(5)
 
-    def add(self, residuals: np.ndarray, dof: np.ndarray, span: float) -> None:
-        """One window's residuals (frames, markers, 2), NaN where not measured, and each
-        frame's degrees of freedom (frames,), spanning ``span`` seconds."""
+    def add(self, residuals: np.ndarray, dof: np.ndarray, speed2: np.ndarray,
+            span: float) -> None:
+        """One window's residuals (frames, markers, 2), NaN where not measured, each frame's
+        degrees of freedom (frames,) and squared image speed (frames,) in (px/s)^2, spanning
+        ``span`` seconds."""
         keep = math.exp(-span / SPREAD_TIME_CONSTANT_S)
-        self._num = keep * self._num + float(np.nansum(residuals**2))
-        self._den = keep * self._den + float(np.sum(dof))
+        d, s2 = dof.astype(float), np.asarray(speed2, dtype=float)
+        E = np.nansum(residuals**2, axis=(1, 2))
+        known = self.coefficients
+        v = np.ones_like(s2) if known is None or known == (0.0, 0.0) else known[0] + known[1] * s2
+        w = 1.0 / np.maximum(v, _SPREAD_FLOOR) ** 2
+        self._sums = keep * self._sums + np.array(
+            [w @ d, w @ (d * s2), w @ (d * s2 * s2), w @ E, w @ (E * s2)])
+
+    @property
+    def coefficients(self) -> tuple[float, float] | None:
+        """(a, b) so far, or None before a frame has shown any."""
+        d, ds2, ds4, E, Es2 = self._sums
+        if not d > 0:
+            return None
+        det = d * ds4 - ds2 * ds2
+        if det > 1e-9 * d * ds4:  # the speeds vary enough to tell a from b
+            a, b = (ds4 * E - ds2 * Es2) / det, (d * Es2 - ds2 * E) / det
+            if b >= 0 and a >= 0:
+                return a, b
+            if a < 0:  # all of it grows with speed
+                return 0.0, Es2 / ds4
+        return E / d, 0.0
 
     @property
     def variance(self) -> float | None:
-        """The variance so far, or None before a frame has shown any."""
-        return self._num / self._den if self._den > 0 else None
+        """The variance at rest (a), or None before a frame has shown any."""
+        c = self.coefficients
+        return None if c is None else c[0]
 
 
 def fit_residuals(obs, X: np.ndarray, labels: np.ndarray,
@@ -167,6 +209,15 @@ def worst_inflation(frame_interval: float) -> float | None:
     if not frame_interval > 0:
         return None
     return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
+
+
+def motion_variance(per_speed2: float, speed2: float, inflation: float | None) -> float:
+    """The pixel variance (px^2) the blur of a frame at squared image speed ``speed2`` adds:
+    MARGIN^2 x inflation x b s^2 (``per_speed2`` b, BlobSpread), none before the inflation is
+    known."""
+    if inflation is None:
+        return 0.0
+    return MARGIN**2 * inflation * per_speed2 * speed2
 
 
 def filter_sigma(model_sigma: float, variance: float | None, inflation: float | None) -> float:

@@ -228,10 +228,11 @@ class Tracker:
         """The skin slide and the blobs' pixel noise followed (tracking/noise_scale.py)."""
         cfg, learned = self.config, self.learned_noise
         obs = self._observation(cfg.use_depth and det.depth is not None)
-        if learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf, cfg.measurement,
-                          cfg.adapt_slide, cfg.learns_pixel_noise):
-            for o in self._obs.values():
-                learned.apply(o)
+        changed = learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf,
+                                 cfg.measurement, cfg.adapt_slide, cfg.learns_pixel_noise)
+        for o in self._obs.values():  # the blur's share every frame, the rest when it changed
+            learned.apply(o)
+        if changed:
             self._compiled = None  # the compiled step's constants made again
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
@@ -359,9 +360,8 @@ class Tracker:
         step, args = self._compiled
         # contiguous blobs and a float dt: numba compiles once per argument type
         uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
-        blob_var = self._observation(True).blob_variance(det.suspect, det.count)
-        code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, blob_var,
-                                                *args)
+        var = self._observation(True).blob_variance(det.suspect, det.count)
+        code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, var, *args)
         if code != compiled.OK:
             return None
         return x, P, labels, n_pairs, nis, 3 * n_pairs
