@@ -155,7 +155,6 @@ class LearnedNoise:
     interval: float = SCORE_INTERVAL_S
     _since: float = math.inf  # s since the last frame scored
     speed2: float = 0.0  # the markers' squared image speed at the last frame, (px/s)^2
-    _last_pixels: np.ndarray | None = None  # the markers' pixels at the last frame's state
     # the open window of frames for the blob errors: (x, each marker's blob, uv, speed2) each,
     # the observation they were tracked with and the time they span
     _window: list = field(default_factory=list)
@@ -170,8 +169,12 @@ class LearnedNoise:
         learning the slide and/or the pixel sigma; whether what the filter should take
         changed. Suspect blobs are left out (:func:`undoubted`)."""
         if pixel:
-            self._follow_speed(obs, x, dt)
+            v, w = model.velocities(x)
+            z = obs.R_c0[2] @ model.pose(x[None])[1][0] + obs.t_c0[2]
+            self.speed2 = pixel_noise.image_speed2(v, w, z, obs.camera.fx, obs.layout_T)
         changed = pixel and self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
+        if pixel:  # the blur's share at this frame's speed, for the next update
+            obs.motion_variance = self._blur_variance(obs)
         self._since += max(dt, 0.0)
         if self._since < self.interval or not slide:
             return changed
@@ -202,20 +205,17 @@ class LearnedNoise:
         obs.scale_slide(self.slide.sd_factor)
         if self.pixel_sigma is not None:
             obs.set_pixel_sigma(self.pixel_sigma)
-        coefficients = self.spread.coefficients
-        blur = 0.0
-        if coefficients is not None:
-            inflation = self.correlation.inflation or self._worst_inflation()
-            blur = pixel_noise.motion_variance(coefficients[1], self.speed2, inflation)
-        obs.motion_variance = min(blur, obs.suspect_variance)
+        obs.motion_variance = self._blur_variance(obs)
 
-    def _follow_speed(self, obs, x: np.ndarray, dt: float) -> None:
-        """The markers' squared image speed (px/s)^2 from the last frame's state to this one's
-        (0 at a new observation or without a frame interval)."""
-        pixels = obs(x[None]).reshape(obs.n_markers, obs.k)[:, :2]
-        last, self._last_pixels = self._last_pixels, pixels
-        fresh = obs is not self._window_obs or last is None or not dt > 0
-        self.speed2 = 0.0 if fresh else float(np.mean(np.sum((pixels - last) ** 2, axis=1))) / dt**2
+    def _blur_variance(self, obs) -> float:
+        """The pixel variance the blur adds at the last frame's image speed (pixel_noise.
+        motion_variance), up to the model's sigma for ``obs``."""
+        coefficients = self.spread.coefficients
+        if coefficients is None or not self.speed2:
+            return 0.0
+        inflation = self.correlation.inflation or self._worst_inflation()
+        blur = pixel_noise.motion_variance(coefficients[1], self.speed2, inflation)
+        return min(blur, obs.suspect_variance)
 
     def _worst_inflation(self) -> float | None:
         """The inflation of errors constant over a window (pixel_noise.worst_inflation): the

@@ -28,10 +28,10 @@ errors constant over a window (:func:`worst_inflation`, the number of frames a w
 A long shutter smears the blobs of the fast frames: under a 1/30-1/40 s shutter the scatter was
 0.014 px below 2 px/frame of image speed, 0.024 at 2-5 and 0.091 at 5-10 (rendered, seed 0),
 where the clean recording's stayed at 0.012-0.017. So the per-frame variance is a + b s^2, s
-the markers' image speed (``BlobSpread``): the filter takes a (within the bounds below) for
-every blob, and each frame adds MARGIN^2 x inflation x b s^2 at the frame's speed
-(:func:`motion_variance`), up to the model's sigma. With the average alone the shutter cost
-0.24 -> 0.29 deg; with the speed 0.20.
+the markers' image speed from the state (:func:`image_speed2`; ``BlobSpread``): the filter
+takes a (within the bounds below) for every blob, and each frame adds MARGIN^2 x inflation x
+b s^2 at the frame's speed (:func:`motion_variance`), up to the model's sigma. With the average
+alone the shutter cost 0.24 -> 0.29 deg; with the speed 0.20.
 
 MARGIN: with the sigma fixed, the rendered recordings came out best at about twice the blobs'
 white-noise equivalent (clean and structured light at 0.05 px or below for 0.027, Bayer at 0.1
@@ -108,6 +108,7 @@ class BlobSpread:
     def __init__(self) -> None:
         # forgetting sums of d/v^2, d s^2/v^2, d s^4/v^2, E/v^2, E s^2/v^2
         self._sums = np.zeros(5)
+        self.coefficients: tuple[float, float] | None = None  # (a, b) so far
 
     def add(self, residuals: np.ndarray, dof: np.ndarray, speed2: np.ndarray,
             span: float) -> None:
@@ -122,10 +123,10 @@ class BlobSpread:
         w = 1.0 / np.maximum(v, _SPREAD_FLOOR) ** 2
         self._sums = keep * self._sums + np.array(
             [w @ d, w @ (d * s2), w @ (d * s2 * s2), w @ E, w @ (E * s2)])
+        self.coefficients = self._solve()
 
-    @property
-    def coefficients(self) -> tuple[float, float] | None:
-        """(a, b) so far, or None before a frame has shown any."""
+    def _solve(self) -> tuple[float, float] | None:
+        """(a, b) of the sums, or None before a frame has shown any."""
         d, ds2, ds4, E, Es2 = self._sums
         if not d > 0:
             return None
@@ -209,6 +210,18 @@ def worst_inflation(frame_interval: float) -> float | None:
     if not frame_interval > 0:
         return None
     return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
+
+
+def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float,
+                 layout_T: np.ndarray) -> float:
+    """The markers' squared image speed (px/s)^2 of a hand moving at ``v`` (m/s) and turning at
+    ``w`` (rad/s) at depth ``z`` (m): (fx / z)^2 (|v|^2 + |w|^2 r^2), r^2 the markers' mean
+    squared distance from the hand's origin (``layout_T`` (3, J), m). A bound on the motion
+    across the line of sight, from the state alone (no projection: a frame costs ~2 us); 0
+    where the state has no speed (NaN, the paper's model)."""
+    r2 = float(np.mean(np.sum(layout_T * layout_T, axis=0)))
+    speed2 = (fx / z) ** 2 * (float(v @ v) + float(w @ w) * r2)
+    return speed2 if math.isfinite(speed2) else 0.0
 
 
 def motion_variance(per_speed2: float, speed2: float, inflation: float | None) -> float:

@@ -228,11 +228,10 @@ class Tracker:
         """The skin slide and the blobs' pixel noise followed (tracking/noise_scale.py)."""
         cfg, learned = self.config, self.learned_noise
         obs = self._observation(cfg.use_depth and det.depth is not None)
-        changed = learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf,
-                                 cfg.measurement, cfg.adapt_slide, cfg.learns_pixel_noise)
-        for o in self._obs.values():  # the blur's share every frame, the rest when it changed
-            learned.apply(o)
-        if changed:
+        if learned.follow(self.model, obs, x, P, labels, det, dt, cfg.ukf, cfg.measurement,
+                          cfg.adapt_slide, cfg.learns_pixel_noise):
+            for o in self._obs.values():
+                learned.apply(o)
             self._compiled = None  # the compiled step's constants made again
 
     def _track_frame(self, det: Detections, track: _Track) -> FrameResult:
