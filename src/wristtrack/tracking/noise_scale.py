@@ -168,13 +168,13 @@ class LearnedNoise:
         ``det`` labelled ``labels``, ``dt`` after the last frame) with the model's ``noise``,
         learning the slide and/or the pixel sigma; whether what the filter should take
         changed. Suspect blobs are left out (:func:`undoubted`)."""
+        changed = False
         if pixel:
             v, w = model.velocities(x)
             z = obs.R_c0[2] @ model.pose(x[None])[1][0] + obs.t_c0[2]
             self.speed2 = pixel_noise.image_speed2(v, w, z, obs.camera.fx, obs.layout_T)
-        changed = pixel and self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
-        if pixel:  # the blur's share at this frame's speed, for the next update
-            obs.motion_variance = self._blur_variance(obs)
+            changed = self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
+            obs.motion_variance = self._blur_variance(obs)  # this frame's, for the next update
         self._since += max(dt, 0.0)
         if self._since < self.interval or not slide:
             return changed
@@ -213,9 +213,13 @@ class LearnedNoise:
         coefficients = self.spread.coefficients
         if coefficients is None or not self.speed2:
             return 0.0
-        inflation = self.correlation.inflation or self._worst_inflation()
-        blur = pixel_noise.motion_variance(coefficients[1], self.speed2, inflation)
+        blur = pixel_noise.motion_variance(coefficients[1], self.speed2, self._inflation())
         return min(blur, obs.suspect_variance)
+
+    def _inflation(self) -> float | None:
+        """The correlation's inflation as measured, or until it is, the most it can be."""
+        measured = self.correlation.inflation
+        return measured if measured is not None else self._worst_inflation()
 
     def _worst_inflation(self) -> float | None:
         """The inflation of errors constant over a window (pixel_noise.worst_inflation): the
@@ -242,7 +246,7 @@ class LearnedNoise:
         self._window.append((x, blob_of, det.uv, self.speed2))
         if not pixel_noise.window_full(self._window_span):
             return False
-        # the whole window in one batch: per frame the step stays ~1 us
+        # the whole window in one batch (~2 ms per half second), not frame by frame
         X = np.stack([frame[0] for frame in self._window])
         uv = np.zeros((len(X), max(1, max(len(f[2]) for f in self._window)), 2))
         for i, frame in enumerate(self._window):
@@ -253,9 +257,6 @@ class LearnedNoise:
         self.spread.add(residuals, dof, speed2, self._window_span)
         self.correlation.add(residuals, self._window_span)
         self._window = []
-        inflation = self.correlation.inflation
-        if inflation is None:  # not measured yet: the most it can be
-            inflation = self._worst_inflation()
-        sigma = pixel_noise.filter_sigma(model_sigma, self.spread.variance, inflation)
+        sigma = pixel_noise.filter_sigma(model_sigma, self.spread.variance, self._inflation())
         changed, self.pixel_sigma = sigma != self.pixel_sigma, sigma
         return changed
