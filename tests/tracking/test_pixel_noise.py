@@ -304,3 +304,22 @@ def test_the_blur_share_is_taken_at_the_frames_speed_up_to_the_model():
     assert obs.motion_variance == pytest.approx(0.3**2 - 0.05**2)
     np.testing.assert_allclose(obs.blob_variance(np.array([False, True]), 2),
                                [obs.motion_variance, obs.motion_variance + obs.suspect_variance])
+
+
+@pytest.mark.parametrize("motion", ["slide across", "turn about the line of sight"])
+def test_the_image_speed_from_the_state_matches_the_markers_projected_motion(motion):
+    """The markers' mean squared image speed, by projecting them a millisecond apart (hand at
+    0.6 m facing the camera, its origin on the optical axis), against image_speed2 from the
+    velocities alone: exact for a slide across the line of sight and for a turn about it."""
+    obs, _ = _observation()
+    camera, layout = obs.camera, obs.layout_T.T
+    v, w = (np.array([0.12, -0.05, 0.0]), np.zeros(3)) if motion == "slide across" \
+        else (np.zeros(3), np.array([0.0, 0.0, 2.5]))
+    t, dt = np.array([0.0, 0.0, 0.6]), 1e-3
+    before = camera.project(layout + t)
+    after = camera.project(layout @ Rotation.from_rotvec(w * dt).as_matrix().T + t + v * dt)
+    projected = np.mean(np.sum((after - before) ** 2, axis=1)) / dt**2
+    assert obs.layout_r2 == pytest.approx(np.mean(np.sum(layout**2, axis=1)))
+    assert pixel_noise.image_speed2(v, w, 0.6, camera.fx, obs.layout_r2) == pytest.approx(
+        projected, rel=0.02)
+    assert pixel_noise.image_speed2(v, np.full(3, np.nan), 0.6, camera.fx, obs.layout_r2) == 0.0

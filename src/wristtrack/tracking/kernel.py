@@ -1,6 +1,6 @@
 """The tracker's step for the default configuration written as plain loops, for numba.
 
-The same filter as the generic path (``Tracker._generic_frame``, the reference, which reads like
+The same filter as the generic path (tracking/generic_step.py, the reference, which reads like
 the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
 chi-square gate and Cholesky correction, for the constant-rate model with pixel + depth
 measurements (and the noise the markers share: skin slide, misregistration) on an undistorted
@@ -273,7 +273,7 @@ def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
 
 
 def _all_visible(q, pvw, layout, R_c0, t_c0, par):
-    """Tracker._expected_markers for all markers: in front, facing the camera, on the sensor."""
+    """generic_step.expected_markers for all markers: in front, facing the camera, on the sensor."""
     Rc = np.empty((3, 3))
     tc = np.empty(3)
     _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)

@@ -172,7 +172,7 @@ class LearnedNoise:
         if pixel:
             v, w = model.velocities(x)
             z = obs.R_c0[2] @ model.pose(x[None])[1][0] + obs.t_c0[2]
-            self.speed2 = pixel_noise.image_speed2(v, w, z, obs.camera.fx, obs.layout_T)
+            self.speed2 = pixel_noise.image_speed2(v, w, z, obs.camera.fx, obs.layout_r2)
             changed = self._add_frame(obs, x, labels, det, dt, noise.pixel_sigma)
             obs.motion_variance = self._blur_variance(obs)  # this frame's, for the next update
         self._since += max(dt, 0.0)

@@ -103,6 +103,9 @@ class MarkerObservation:
         self.camera = camera
         self.layout_T = np.asarray(layout_points, dtype=float).T.copy()  # (3, 6)
         self.n_markers = self.layout_T.shape[1]
+        # the markers' mean squared distance from the hand's origin (m^2): their image speed
+        # per turning rate (pixel_noise.image_speed2), fixed with the layout
+        self.layout_r2 = float(np.mean(np.sum(self.layout_T**2, axis=0)))
         self.R_c0 = np.asarray(R_c0, dtype=float)
         self.t_c0 = np.asarray(t_c0, dtype=float)
         self.pose = pose

@@ -212,14 +212,12 @@ def worst_inflation(frame_interval: float) -> float | None:
     return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
 
 
-def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float,
-                 layout_T: np.ndarray) -> float:
+def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float, r2: float) -> float:
     """The markers' squared image speed (px/s)^2 of a hand moving at ``v`` (m/s) and turning at
-    ``w`` (rad/s) at depth ``z`` (m): (fx / z)^2 (|v|^2 + |w|^2 r^2), r^2 the markers' mean
-    squared distance from the hand's origin (``layout_T`` (3, J), m). A bound on the motion
-    across the line of sight, from the state alone (no projection: a frame costs ~2 us); 0
-    where the state has no speed (NaN, the paper's model)."""
-    r2 = float(np.mean(np.sum(layout_T * layout_T, axis=0)))
+    ``w`` (rad/s) at depth ``z`` (m): (fx / z)^2 (|v|^2 + |w|^2 r^2), ``r2`` the markers' mean
+    squared distance from the hand's origin (m^2, MarkerObservation.layout_r2). A bound on the
+    motion across the line of sight, from the state alone (no projection: a frame costs ~1 us);
+    0 where the state has no speed (NaN, the paper's model)."""
     speed2 = (fx / z) ** 2 * (float(v @ v) + float(w @ w) * r2)
     return speed2 if math.isfinite(speed2) else 0.0
 

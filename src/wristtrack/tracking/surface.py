@@ -186,7 +186,7 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     P = surface.points @ R_ch.T + t_ch
     N = surface.normals @ R_ch.T
     dist = np.linalg.norm(P, axis=1)
-    # the back of the hand faces the camera (as tracker._expected_markers asks of the markers)
+    # the back of the hand faces the camera (as generic_step.expected_markers asks of the markers)
     facing = -np.einsum("kj,kj->k", N, P) / dist > settings.grazing_cos
     uv = camera.project(P)
     ok = facing & (P[:, 2] > 0) & np.isfinite(uv).all(axis=1)

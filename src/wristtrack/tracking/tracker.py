@@ -11,7 +11,7 @@ without hand.json the layout averaged over them); it never moves afterwards.
 
 Each tracking frame is one filter step: predict, associate, update; then, once the still start
 has taught it the shape of the skin between the markers, a second update with that skin's depth
-(tracking/surface.py). The generic path (``Tracker._generic_frame``) is the reference and reads
+(tracking/surface.py). The generic path (tracking/generic_step.py) is the reference and reads
 like the paper; for the default configuration the same step runs as one compiled call
 (tracking/compiled.py, numba) where numba loads, and the generic path takes every other
 configuration and every frame the compiled step declines. The manoeuvre retry and the
@@ -31,12 +31,11 @@ from scipy.special import chdtri
 from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError, InputError
-from wristtrack.filter import associate as assoc
-from wristtrack.filter import ukf
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose
-from wristtrack.tracking import compiled, hypotheses, noise_scale, observation, surface
+from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
 from wristtrack.tracking.config import TrackerConfig
+from wristtrack.tracking.generic_step import generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
@@ -366,75 +365,11 @@ class Tracker:
         return x, P, labels, n_pairs, nis, 3 * n_pairs
 
     def _generic_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
-        """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)."""
-        cfg, model = self.config, self.model
-        use_depth = cfg.use_depth and det.depth is not None
-        obs = self._observation(use_depth)
-        k = obs.k
-        x, P, pred = ukf.predict_with_measurement(
-            model, track.x, track.P, dt, model.process_noise(dt), obs, params=cfg.ukf
-        )
-        own = np.diag(obs.noise_variance(pred.y))
-        R = own + obs.shared_covariance(x)
-        expected = self._expected_markers(x, obs)
-
-        n_markers = obs.n_markers
-        y_hat = pred.y.reshape(n_markers, k)[expected]
-        # Each marker is matched to a blob by its own noise: the noise the markers share (skin
-        # slide, misregistration) moves them together, and counted in every marker's gate
-        # alone it let clutter beside a marker in. The update takes all of it.
-        S = _diagonal_blocks(pred.Pyy + own, n_markers, k)[expected]
-        z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
-        llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, self.assoc_params)
-        gated = assoc.gate(d2, z, self.assoc_params)
-        marker_ids = np.flatnonzero(expected)
-
-        nis, dof = np.nan, 0
-        if cfg.association == "jpda":
-            beta = assoc.jpda_marginals(assoc.pair_scores(llr, self.assoc_params), gated)
-            labels = assoc.labels_from_marginals(beta)
-            x, P = self._jpda_update(x, P, pred, R, z, beta, marker_ids, k)
-        else:
-            if cfg.association == "gnn":
-                local = assoc.associate_gnn(assoc.pair_scores(llr, self.assoc_params), gated)
-            else:
-                local = assoc.associate_paper(llr, self.assoc_params)
-            labels = np.full(det.count, assoc.CLUTTER)
-            labels[local >= 0] = marker_ids[local[local >= 0]]
-            rows, values = observation.stacked_rows(labels, z, k)
-            if rows.size:
-                R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
-                res = ukf.update(model, x, P, pred, values, R_u, rows=rows)
-                x, P, nis, dof = res.x, res.P, res.nis, res.dof
-
-        n_assoc = int(np.unique(labels[labels >= 0]).size)
-        return x, P, labels, n_assoc, nis, dof
-
-    def _expected_markers(self, x: np.ndarray, obs: MarkerObservation) -> np.ndarray:
-        """Markers that can be seen at the predicted pose: in the image, palm not turned away."""
-        pts = obs.marker_points(x[None])[0]
-        R_rel, _ = self.model.pose(x[None])
-        normal = self.R_c0 @ R_rel[0, :, 2]
-        facing = -(pts @ normal) / np.sqrt(np.einsum("ij,ij->i", pts, pts))
-        ok = (facing > self.config.facing_cos) & (pts[:, 2] > 0)
-        return ok & self.camera.in_image(self.camera.project(pts))
-
-    def _jpda_update(self, x, P, pred, R, z, beta, marker_ids, k):
-        groups, candidates, weights = [], [], []
-        for col, j in enumerate(marker_ids):
-            hit = np.flatnonzero(beta[:, col] > 1e-6)
-            if hit.size == 0:
-                continue
-            Z = z[hit].copy()
-            if k == 3:  # a blob without depth carries no depth information: use the prediction
-                missing = ~np.isfinite(Z[:, 2])
-                Z[missing, 2] = pred.y[j * k + 2]
-            groups.append(np.arange(j * k, j * k + k))
-            candidates.append(Z)
-            weights.append(beta[hit, col])
-        if not groups:
-            return x, P
-        return ukf.pda_update(self.model, x, P, pred, R, groups, candidates, weights)
+        """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)
+        (tracking/generic_step.py)."""
+        obs = self._observation(self.config.use_depth and det.depth is not None)
+        return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
+                                  self.assoc_params, self.camera, self.R_c0))
 
     # -------------------------------------------------------------------------------- output
 
@@ -491,9 +426,3 @@ def _all_finite(a: np.ndarray) -> bool:
     if flat.size > _ONES.size:
         return bool(np.isfinite(flat).all())
     return math.isfinite(flat.dot(_ONES[: flat.size]))
-
-
-def _diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
-    """The n diagonal (k, k) blocks of A (n*k, n*k) as an (n, k, k) array."""
-    idx = np.arange(n)[:, None] * k + np.arange(k)
-    return A[idx[:, :, None], idx[:, None, :]]

@@ -1,0 +1,120 @@
+"""One filter step of the markers for any configuration: predict, associate, update.
+
+The reference the compiled step (tracking/compiled.py, kernel.py) is tested against, and the
+path every configuration and frame it declines takes: any state model, the paper's association
+or JPDA, colour alone. It reads like the paper: the unscented prediction of the state and of
+each marker's measurement, each blob scored against each marker that can be seen, the pairs
+chosen, and one update with all the chosen pairs. The tracker (tracking/tracker.py) decides
+what to do with the result (the manoeuvre retry, the NIS test, the skin's depth update).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from wristtrack.camera import Camera
+from wristtrack.detect.detections import Detections
+from wristtrack.filter import associate as assoc
+from wristtrack.filter import ukf
+from wristtrack.tracking import observation
+from wristtrack.tracking.config import TrackerConfig
+from wristtrack.tracking.observation import MarkerObservation
+
+
+class StepResult(NamedTuple):
+    """A frame's markers update: the posterior, each blob's marker (-1: clutter), how many
+    markers were associated, and the update's NIS with its degrees of freedom (NaN, 0 without
+    an update or with JPDA's)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    labels: np.ndarray
+    n_assoc: int
+    nis: float
+    dof: int
+
+
+def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt: float,
+                 det: Detections, config: TrackerConfig, assoc_params: assoc.AssociationParams,
+                 camera: Camera, R_c0: np.ndarray) -> StepResult:
+    """The step of state model ``model`` from (x, P) over ``dt`` s with the blobs ``det``,
+    measured by ``obs`` (with depth or colour alone), W0's rotation ``R_c0``."""
+    k = obs.k
+    x, P, pred = ukf.predict_with_measurement(
+        model, x, P, dt, model.process_noise(dt), obs, params=config.ukf
+    )
+    own = np.diag(obs.noise_variance(pred.y))
+    R = own + obs.shared_covariance(x)
+    expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
+
+    n_markers = obs.n_markers
+    y_hat = pred.y.reshape(n_markers, k)[expected]
+    # Each marker is matched to a blob by its own noise: the noise the markers share (skin
+    # slide, misregistration) moves them together, and counted in every marker's gate
+    # alone it let clutter beside a marker in. The update takes all of it.
+    S = diagonal_blocks(pred.Pyy + own, n_markers, k)[expected]
+    z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
+    llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, assoc_params)
+    gated = assoc.gate(d2, z, assoc_params)
+    marker_ids = np.flatnonzero(expected)
+
+    nis, dof = np.nan, 0
+    if config.association == "jpda":
+        beta = assoc.jpda_marginals(assoc.pair_scores(llr, assoc_params), gated)
+        labels = assoc.labels_from_marginals(beta)
+        x, P = _jpda_update(model, x, P, pred, R, z, beta, marker_ids, k)
+    else:
+        if config.association == "gnn":
+            local = assoc.associate_gnn(assoc.pair_scores(llr, assoc_params), gated)
+        else:
+            local = assoc.associate_paper(llr, assoc_params)
+        labels = np.full(det.count, assoc.CLUTTER)
+        labels[local >= 0] = marker_ids[local[local >= 0]]
+        rows, values = observation.stacked_rows(labels, z, k)
+        if rows.size:
+            R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
+            res = ukf.update(model, x, P, pred, values, R_u, rows=rows)
+            x, P, nis, dof = res.x, res.P, res.nis, res.dof
+
+    n_assoc = int(np.unique(labels[labels >= 0]).size)
+    return StepResult(x, P, labels, n_assoc, nis, dof)
+
+
+def expected_markers(model, obs: MarkerObservation, x: np.ndarray, R_c0: np.ndarray,
+                     camera: Camera, facing_cos: float) -> np.ndarray:
+    """(6,) bool: the markers that can be seen at state ``x``: in front of the camera, on the
+    sensor, the back of the hand not turned further away than ``facing_cos``."""
+    pts = obs.marker_points(x[None])[0]
+    R_rel, _ = model.pose(x[None])
+    normal = R_c0 @ R_rel[0, :, 2]
+    facing = -(pts @ normal) / np.sqrt(np.einsum("ij,ij->i", pts, pts))
+    ok = (facing > facing_cos) & (pts[:, 2] > 0)
+    return ok & camera.in_image(camera.project(pts))
+
+
+def diagonal_blocks(A: np.ndarray, n: int, k: int) -> np.ndarray:
+    """The n diagonal (k, k) blocks of A (n*k, n*k) as an (n, k, k) array."""
+    idx = np.arange(n)[:, None] * k + np.arange(k)
+    return A[idx[:, :, None], idx[:, None, :]]
+
+
+def _jpda_update(model, x, P, pred, R, z, beta, marker_ids, k):
+    """The probabilistic-data-association update: each marker against every blob it may have
+    made, weighted by the association's marginals ``beta`` (blobs, markers)."""
+    groups, candidates, weights = [], [], []
+    for col, j in enumerate(marker_ids):
+        hit = np.flatnonzero(beta[:, col] > 1e-6)
+        if hit.size == 0:
+            continue
+        Z = z[hit].copy()
+        if k == 3:  # a blob without depth carries no depth information: use the prediction
+            missing = ~np.isfinite(Z[:, 2])
+            Z[missing, 2] = pred.y[j * k + 2]
+        groups.append(np.arange(j * k, j * k + k))
+        candidates.append(Z)
+        weights.append(beta[hit, col])
+    if not groups:
+        return x, P
+    return ukf.pda_update(model, x, P, pred, R, groups, candidates, weights)
