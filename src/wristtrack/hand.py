@@ -22,6 +22,7 @@ from wristtrack.jsonfile import read_config, write_config
 
 MARKER_NAMES = ("WRIST", "CMC1", "MCP2", "MCP3", "MCP4", "MCP5")
 MCP3_INDEX = MARKER_NAMES.index("MCP3")
+MARKER_DIAMETER_M = 0.012  # the paper's markers: discs of blue paper, 1.2 cm across
 
 # Validation limits (metres). Why: closer markers merge into one blob; a layout farther than
 # 25 cm is not a hand (usually millimetres written as metres); a (nearly) collinear layout leaves

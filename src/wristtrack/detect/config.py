@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wristtrack.errors import ConfigError
+from wristtrack.hand import MARKER_DIAMETER_M
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ class DetectorConfig:
     min_similarity: float = 0.6  # Bhattacharyya coefficient blob histogram vs reference
 
     # --- size and shape, relative to the expected marker diameter where it is known
-    marker_diameter_m: float = 0.012
+    marker_diameter_m: float = MARKER_DIAMETER_M
     min_area_px: int = 6
     max_blob_px: int = 80  # blobs with a longer box side are not markers (a 12 mm disc at 8 cm)
     min_size_ratio: float = 0.45  # major axis / expected diameter below: not a whole marker
