@@ -138,3 +138,19 @@ def test_a_wrong_association_after_a_long_gap_is_not_reported(tmp_path, rendered
             error = poses[angle][i] - truth[angle][frames[i]]
             assert abs(error) < 3.0, (frames[i], angle, error)
 
+
+def test_frames_far_apart_are_not_taken_for_the_still_start(tmp_path, rendered, cut_recording):
+    """The 'mix' movement rendered at 30 fps, cut to frames 0, 39, 49, 108 and 127 (a live run
+    that dropped most frames). Frame 49, 20 deg into the movement and 1.6 s after the first fix,
+    had been taken for the still start, and the rows reported against it, 20 deg off. The
+    angles must follow the truth."""
+    mix = rendered("no_hand")
+    frames = [0, 39, 49, 108, 127]
+    cut = cut_recording(mix, frames, tmp_path / "cut")
+    track_recording(open_recording(cut), tmp_path / "run", progress=False)
+    poses = read_poses(tmp_path / "run" / "poses.csv")
+    truth = read_poses(mix / "truth.csv")
+    assert list(poses["status"]) == [Status.TRACKING.value] * len(frames)
+    for angle in ("deviation_deg", "flexion_deg", "pronation_deg"):
+        error = poses[angle] - truth[angle][frames]
+        assert np.abs(error).max() < 3.0, (angle, error)

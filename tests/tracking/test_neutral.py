@@ -14,7 +14,13 @@ from wristtrack.geometry import wrist_angles
 from wristtrack.hand import HandLayout, estimate_layout, fit_pose
 from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import Trajectory, scenario
-from wristtrack.tracking.neutral import STILL_FRAMES, STILL_PX, StillStart, reanchor
+from wristtrack.tracking.neutral import (
+    STILL_FRAMES,
+    STILL_PX,
+    STILL_SPAN_S,
+    StillStart,
+    reanchor,
+)
 from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.pose_fit import initial_guess, refine_pose
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
@@ -92,6 +98,20 @@ def test_still_start_ends_when_the_hand_moves_and_needs_enough_frames():
     other = StillStart(cam)
     other.add(frames[0].detections, frames[0].labels, np.zeros(3), np.zeros(3))
     assert other.add(frames[1].detections, frames[1].labels, np.array([0.3, 0, 0]), np.zeros(3))
+
+
+def test_a_frame_long_after_the_first_fix_ends_the_still_start():
+    """A still hand's frames, the second arriving later than STILL_SPAN_S after the first fix
+    (a run that dropped frames): it is not part of the still start, which ends without it."""
+    cam, layout = Camera.default(), arched()
+    _, _, frames = still_frames(layout, np.random.default_rng(3), n=3)
+    t0 = frames[0].detections.timestamp
+    still = StillStart(cam, t0)
+    assert not still.add(frames[1].detections, frames[1].labels, np.zeros(3), np.zeros(3))
+    det = frames[2].detections
+    late = type(det)(t0 + STILL_SPAN_S + 0.01, det.uv, det.depth)
+    assert still.add(late, frames[2].labels, np.zeros(3), np.zeros(3))
+    assert len(still.uv) == 1
 
 
 def test_a_velocity_within_the_filters_own_uncertainty_is_not_motion():

@@ -202,7 +202,7 @@ class Tracker:
             self.R_c0, self.t_c0 = init.R_ch, init.t_ch
             self.layout = init.layout
             if type(self.model) is ConstantRateModel:
-                self._still = StillStart(self.camera)
+                self._still = StillStart(self.camera, det.timestamp)
         R = self.R_c0.T @ init.R_ch
         p = self.R_c0.T @ (init.t_ch - self.t_c0)
         # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
