@@ -16,8 +16,8 @@ from wristtrack.sim.detections import NoiseModel, simulate_detections
 from wristtrack.sim.motion import Trajectory, scenario
 from wristtrack.tracking.neutral import (
     STILL_FRAMES,
+    STILL_GAP_S,
     STILL_PX,
-    STILL_SPAN_S,
     StillStart,
     reanchor,
 )
@@ -100,18 +100,22 @@ def test_still_start_ends_when_the_hand_moves_and_needs_enough_frames():
     assert other.add(frames[1].detections, frames[1].labels, np.array([0.3, 0, 0]), np.zeros(3))
 
 
-def test_a_frame_long_after_the_first_fix_ends_the_still_start():
-    """A still hand's frames, the second arriving later than STILL_SPAN_S after the first fix
-    (a run that dropped frames): it is not part of the still start, which ends without it."""
+def test_a_frame_long_after_the_last_ends_the_still_start():
+    """A still hand's frames: one STILL_GAP_S after the last taken (a run that dropped frames)
+    is not part of the still start, which ends without it; frames nearly as far apart (a slow
+    camera) are."""
     cam, layout = Camera.default(), arched()
-    _, _, frames = still_frames(layout, np.random.default_rng(3), n=3)
+    _, _, frames = still_frames(layout, np.random.default_rng(3), n=4)
     t0 = frames[0].detections.timestamp
     still = StillStart(cam, t0)
-    assert not still.add(frames[1].detections, frames[1].labels, np.zeros(3), np.zeros(3))
-    det = frames[2].detections
-    late = type(det)(t0 + STILL_SPAN_S + 0.01, det.uv, det.depth)
-    assert still.add(late, frames[2].labels, np.zeros(3), np.zeros(3))
-    assert len(still.uv) == 1
+    for k in (1, 2):
+        det = frames[k].detections
+        slow = type(det)(t0 + k * 0.9 * STILL_GAP_S, det.uv, det.depth)
+        assert not still.add(slow, frames[k].labels, np.zeros(3), np.zeros(3))
+    det = frames[3].detections
+    late = type(det)(t0 + 1.8 * STILL_GAP_S + STILL_GAP_S + 0.01, det.uv, det.depth)
+    assert still.add(late, frames[3].labels, np.zeros(3), np.zeros(3))
+    assert len(still.uv) == 2
 
 
 def test_a_velocity_within_the_filters_own_uncertainty_is_not_motion():

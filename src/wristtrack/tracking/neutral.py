@@ -33,11 +33,12 @@ from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.pose_fit import refine_pose
 
 STILL_FRAMES = 15  # frames averaged (0.5 s at 30 fps: the paper's still start)
-# Frames later than this after the first fix are not the still start, however few came before
-# them: a live run that dropped frames, a hand lost and found again. (A run cut to frames 0, 39
-# and 49 had taken frame 49, 20 deg into a movement, for the still start, and reported its rows
-# against it: 20 deg off.)
-STILL_SPAN_S = 1.0
+# A frame that comes this long after the last one the still start took (or the first fix) ends
+# it: frames were lost and the hand may have moved unseen (a live run that dropped most frames,
+# a hand lost and found again). A run cut to frames 0, 39 and 49 had taken frame 49, 20 deg into
+# the movement and 1.6 s after the fix, for the still start and reported its rows against it,
+# 20 deg off. Frames a few hundred ms apart (a slow camera) still make one.
+STILL_GAP_S = 0.5
 MIN_FRAMES = 5  # fewer usable frames before the hand moves: keep the one-frame layout
 STILL_PX = 2.5  # markers this far (px, median) from where the still start found them: moving
 STILL_SPEED = 0.03  # m/s; or the filter sees the hand move this fast
@@ -67,7 +68,7 @@ class StillStart:
     def __init__(self, camera: Camera, t0: float | None = None,
                  n_frames: int = STILL_FRAMES) -> None:
         self.camera = camera
-        self.t0 = t0  # the first fix's timestamp (s); None: no limit on the span
+        self.last_t = t0  # the last frame's (first: the fix's) timestamp (s); None: no limit
         self.n_frames = n_frames
         self.frames: list[np.ndarray] = []  # (6,3) camera-frame centres, all six with depth
         self.uv: list[np.ndarray] = []  # (6,2) and (6,) of every frame, NaN where unlabelled
@@ -79,9 +80,9 @@ class StillStart:
             cov_v: np.ndarray | None = None, cov_w: np.ndarray | None = None) -> bool:
         """Take one tracked frame (blob ``labels``, the filter's velocities ``v``, ``w`` and,
         where known, their covariances); True once the still start is over (enough frames, a
-        frame more than STILL_SPAN_S after the first fix, or the hand started moving: its
-        markers moved, or the filter's velocity is above its threshold and, given its
-        covariance, significantly so)."""
+        frame more than STILL_GAP_S after the last, or the hand started moving: its markers
+        moved, or the filter's velocity is above its threshold and, given its covariance,
+        significantly so)."""
         if self.closed:
             return True
         blobs = np.flatnonzero(labels >= 0)
@@ -94,11 +95,12 @@ class StillStart:
                 moved = float(np.nanmedian(d))
         if (moved > STILL_PX or _moving(v, cov_v, STILL_SPEED) or _moving(w, cov_w, STILL_RATE)
                 or len(self.uv) >= self.n_frames
-                or (self.t0 is not None and det.timestamp - self.t0 > STILL_SPAN_S)):
+                or (self.last_t is not None and det.timestamp - self.last_t > STILL_GAP_S)):
             self.closed = True
             return True
         if det.depth is not None:
             z[labels[blobs]] = det.depth[blobs]
+        self.last_t = det.timestamp
         self.uv.append(uv)
         self.depth.append(z)
         if det.depth is not None and det.depth_image is not None:
