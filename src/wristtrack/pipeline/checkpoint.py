@@ -40,7 +40,7 @@ _FORMAT = "wristtrack-checkpoint"
 _VERSION = 8  # 2: the skin's shape learned over the still start; 3: its noise; 4: the frame
 # rate; 5: the frame rate taken from the correlation's windows; 6: suspect blobs (the
 # observation keeps the model's pixel sigma); 7: the blob noise from each frame's own fit;
-# 8: the observation keeps the layout's mean squared radius, the still start its first fix's time
+# 8: the observation keeps the layout's mean squared radius, the still start its last frame's time
 _SAMPLE = 1 << 20  # bytes hashed at each end of a video or bag file for its fingerprint
 _FINGERPRINT_NAMES = {
     "software": "software version",
