@@ -183,6 +183,13 @@ def _live(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     return [summary_line(result)], live_section(result)
 
 
+def _dropped(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
+    from benchmarks.dropped import bench_dropped, dropped_section, summary_line
+
+    result = bench_dropped(ctx.cache, n_random=10 if ctx.quick else 60)
+    return [summary_line(result)], dropped_section(result)
+
+
 def _validation(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     from benchmarks.validation import validation_section
 
@@ -203,6 +210,7 @@ SECTIONS: dict[str, Section] = {  # in the document's order
     "robustness": _robustness,
     "batch": _batch,
     "live": _live,
+    "dropped": _dropped,
     "validation": _validation,
     "paper": _paper,
 }
