@@ -140,3 +140,45 @@ def test_sigma_weights_match_filterpy():
         w = ukf.sigma_weights(n, a, b, k)
         np.testing.assert_allclose(w.mean, pts.Wm, rtol=1e-12)
         np.testing.assert_allclose(w.cov, pts.Wc, rtol=1e-12)
+
+
+def test_the_iterated_update_reaches_the_map_estimate_that_one_update_stops_short_of():
+    """A far prior met by a strongly nonlinear measurement (bearing and range of a point seen
+    from the origin; the prior 60 deg off): iterated posterior linearisation converges to the
+    maximum a posteriori estimate, found independently by SciPy's least squares on the MAP
+    cost; one unscented correction stops short of it. On a linear measurement the iteration
+    changes nothing (the Kalman filter's answer)."""
+    from scipy.optimize import least_squares
+
+    model = ukf.EuclideanModel(2, lambda X, N, dt: X)
+
+    def h(X):
+        return np.column_stack((np.arctan2(X[:, 1], X[:, 0]), np.hypot(X[:, 0], X[:, 1])))
+
+    x0, P0 = np.array([1.0, 0.0]), np.diag([0.6, 0.6]) ** 2
+    R = np.diag([0.01, 0.02]) ** 2
+    z = h(np.array([[np.cos(1.05), np.sin(1.05)]]) * 1.1)[0]
+    rows = np.arange(2)
+
+    def map_residuals(x):
+        cost_prior = np.linalg.cholesky(np.linalg.inv(P0)).T @ (x - x0)
+        return np.concatenate((cost_prior, (z - h(x[None])[0]) / np.sqrt(np.diag(R))))
+
+    x_map = least_squares(map_residuals, x0 + [0.0, 0.5]).x
+    pred = ukf.predict_measurement(model, x0, P0, h)
+    once = ukf.update(model, x0, P0, pred, z, R)
+    again = ukf.iterated_update(model, (x0, P0), (once.x, once.P), h, z, R, rows, iterations=5)
+    assert np.linalg.norm(once.x - x_map) > 0.05
+    np.testing.assert_allclose(again.x, x_map, atol=1e-4)
+
+    H = np.array([[1.0, 0.5], [-0.3, 2.0]])
+
+    def linear(X):
+        return X @ H.T
+
+    pred = ukf.predict_measurement(model, x0, P0, linear)
+    once = ukf.update(model, x0, P0, pred, z, R)
+    again = ukf.iterated_update(model, (x0, P0), (once.x, once.P), linear, z, R, rows, iterations=3)
+    K = P0 @ H.T @ np.linalg.inv(H @ P0 @ H.T + R)
+    np.testing.assert_allclose(again.x, x0 + K @ (z - H @ x0), atol=1e-10)
+    np.testing.assert_allclose(again.P, P0 - K @ H @ P0, atol=1e-10)

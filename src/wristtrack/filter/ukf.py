@@ -245,6 +245,41 @@ def update(
     return UpdateResult(x_new, symmetrise(P_new), float(e @ e), int(z.shape[0]))
 
 
+def iterated_update(
+    model: ManifoldModel,
+    prior: tuple[np.ndarray, np.ndarray],
+    posterior: tuple[np.ndarray, np.ndarray],
+    h,
+    z: np.ndarray,
+    R: np.ndarray,
+    rows: np.ndarray,
+    params: UKFParams = UKFParams(),
+    iterations: int = 1,
+) -> UpdateResult:
+    """The correction again, with h linearised over the posterior instead of the prior.
+
+    Iterated posterior linearisation (Garcia-Fernandez et al., IEEE TSP 2015): the sigma points
+    of the posterior (x1, P1) give a linear model of h(x) = y + H (x - x1) with residual
+    covariance Omega, and the prior (x0, P0) is corrected with it. A prior far from the truth
+    (a long gap) meets h where its curvature matters, and one unscented correction stops short;
+    the posterior is near enough for the linear model to hold. ``rows`` select the measured rows
+    of h, ``R`` (k, k) their noise; each iteration starts from the last posterior. The prior's
+    covariance is taken in the posterior's tangent space as it is (no transport)."""
+    x0, P0 = prior
+    x1, P1 = posterior
+    for _ in range(iterations):
+        pred = predict_measurement(model, x1, P1, h, params)
+        y, Pyy, Pxy = pred.y[rows], pred.Pyy[np.ix_(rows, rows)], pred.Pxy[:, rows]
+        H = np.linalg.solve(P1, Pxy).T  # statistical linearisation: Pxy = P1 H^T
+        S = H @ P0 @ H.T + (Pyy - H @ P1 @ H.T) + R
+        d0 = model.lift(x1, x0[None])[0]
+        Ae = cholesky_whiten(S, np.column_stack((H @ P0, z - y - H @ d0)))
+        A, e = Ae[:, :-1], Ae[:, -1]
+        x1 = model.retract(x1, (d0 + A.T @ e)[None])[0]
+        P1 = symmetrise(P0 - A.T @ A)
+    return UpdateResult(x1, P1, float(e @ e), int(z.shape[0]))
+
+
 def cholesky_whiten(S: np.ndarray, B: np.ndarray, alpha: float = 1.0) -> np.ndarray:
     """alpha L^-1 B for the Cholesky factor L of S, by a triangular solve (safe_cholesky's
     fallbacks, which need not be triangular, by a general one)."""

@@ -38,13 +38,15 @@ class StepResult(NamedTuple):
 
 def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt: float,
                  det: Detections, config: TrackerConfig, assoc_params: assoc.AssociationParams,
-                 camera: Camera, R_c0: np.ndarray) -> StepResult:
+                 camera: Camera, R_c0: np.ndarray, iterations: int = 0) -> StepResult:
     """The step of state model ``model`` from (x, P) over ``dt`` s with the blobs ``det``,
-    measured by ``obs`` (with depth or colour alone), W0's rotation ``R_c0``."""
+    measured by ``obs`` (with depth or colour alone), W0's rotation ``R_c0``; the one-to-one
+    update corrected ``iterations`` more times over its posterior (ukf.iterated_update)."""
     k = obs.k
     x, P, pred = ukf.predict_with_measurement(
         model, x, P, dt, model.process_noise(dt), obs, params=config.ukf
     )
+    prior = (x, P)
     own = np.diag(obs.noise_variance(pred.y))
     R = own + obs.shared_covariance(x)
     expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
@@ -76,6 +78,9 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
         if rows.size:
             R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
             res = ukf.update(model, x, P, pred, values, R_u, rows=rows)
+            if iterations:
+                res = ukf.iterated_update(model, prior, (res.x, res.P), obs, values, R_u, rows,
+                                          config.ukf, iterations)
             x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
     n_assoc = int(np.unique(labels[labels >= 0]).size)
