@@ -46,6 +46,10 @@ class TrackerConfig:
     # whose inconsistent or retried update left the markers off their blobs, is fitted afresh,
     # as an initialisation would (Tracker._reacquire). False: the paper's way.
     reacquire: bool = True
+    # After a gap (a step over tracker.LONG_GAP_S: frames dropped) the prediction may be far
+    # off, and one unscented correction stops short: the update is iterated this many times
+    # over its posterior (ukf.iterated_update). 0: one update, the paper's way.
+    gap_iterations: int = 2
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -55,6 +59,8 @@ class TrackerConfig:
                 f"unknown association {self.association!r}; choose one of "
                 f"{', '.join(assoc.METHODS)}"
             )
+        if self.gap_iterations < 0:
+            raise ValueError(f"gap_iterations must be 0 or more, got {self.gap_iterations}")
 
     @property
     def learns_pixel_noise(self) -> bool:
@@ -82,6 +88,7 @@ class TrackerConfig:
         kw.setdefault("nis_lost_after", 0)
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
+        kw.setdefault("gap_iterations", 0)
         kw.setdefault("adapt_pixel", False)
         kw.setdefault("surface", None)
         kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles

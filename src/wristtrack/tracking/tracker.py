@@ -46,10 +46,10 @@ from wristtrack.tracking.results import FrameResult, Status
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
 
 # A step longer than this (s) is a gap, not a frame period (frames dropped or not delivered):
-# the prediction may be far off, and the update is iterated over its posterior this many times
-# (ukf.iterated_update; the generic step, which the compiled one leaves such frames to).
+# the prediction may be far off, and the update is iterated over its posterior
+# (TrackerConfig.gap_iterations; in the generic step, which the compiled one leaves such frames
+# to).
 LONG_GAP_S = 0.2
-GAP_ITERATIONS = 2
 
 
 @dataclass
@@ -390,7 +390,8 @@ class Tracker:
                 self.model, self._observation(True), cfg.ukf, cfg.facing_cos, self.assoc_params
             )
             self._compiled = (compiled.load(), args)
-        if not self._compiled_usable or det.depth is None or det.count == 0 or dt > LONG_GAP_S:
+        gap = dt > LONG_GAP_S and self.config.gap_iterations
+        if not self._compiled_usable or det.depth is None or det.count == 0 or gap:
             return None
         if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
             return None
@@ -407,7 +408,7 @@ class Tracker:
         """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)
         (tracking/generic_step.py)."""
         obs = self._observation(self.config.use_depth and det.depth is not None)
-        iterations = GAP_ITERATIONS if dt > LONG_GAP_S else 0
+        iterations = self.config.gap_iterations if dt > LONG_GAP_S else 0
         return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
                                   self.assoc_params, self.camera, self.R_c0, iterations))
 
