@@ -16,7 +16,9 @@ like the paper; for the default configuration the same step runs as one compiled
 (tracking/compiled.py, numba) where numba loads, and the generic path takes every other
 configuration and every frame the compiled step declines. The manoeuvre retry and the
 innovation-consistency (NIS) logic sit above both; each update then tells how much the skin
-over the knuckles slides and how sharp the blobs are (tracking/noise_scale.py).
+over the knuckles slides and how sharp the blobs are (tracking/noise_scale.py). After a gap
+(frames dropped) the update is iterated over its posterior, and an update that leaves the
+markers off their blobs' discs, where no fresh fit does better, is not taken (the frame coasts).
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
 # (TrackerConfig.gap_iterations; in the generic step, which the compiled one leaves such frames
 # to).
 LONG_GAP_S = 0.2
+_MIN_REFIT = 4  # markers a re-fit keeps at least: a pose from their pixels alone (pose_fit)
 
 
 @dataclass
@@ -169,7 +172,7 @@ class Tracker:
                 # Suspect blobs (clipped, smeared) can pull the fit off the others (two blobs
                 # 2.4-3 px off on a fast reach left the fit 1.4 px rms): fit the others alone.
                 labels = noise_scale.undoubted(init.labels, det)
-                if np.array_equal(labels, init.labels) or (labels >= 0).sum() < 4:
+                if np.array_equal(labels, init.labels) or (labels >= 0).sum() < _MIN_REFIT:
                     return None
                 init = initialise(det, self.camera, self.layout, labels=labels)
         except InitialisationError:
