@@ -265,6 +265,8 @@ def iterated_update(
     the posterior is near enough for the linear model to hold. ``rows`` select the measured rows
     of h, ``R`` (k, k) their noise; each iteration starts from the last posterior. The prior's
     covariance is taken in the posterior's tangent space as it is (no transport)."""
+    if iterations < 1:
+        raise ValueError(f"iterated_update needs at least one iteration, got {iterations}")
     x0, P0 = prior
     x1, P1 = posterior
     for _ in range(iterations):

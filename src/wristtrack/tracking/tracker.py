@@ -166,6 +166,8 @@ class Tracker:
         a long gap after a fresh start with no velocity yet). Coasting on it would
         drift further while they are in plain view, and one unscented update from that far
         off lands short of them (a 45 deg jump left 20 deg)."""
+        # A fit that leaves the blobs off the markers is no better than the prediction (a hand
+        # that no longer matches the layout): the innovation check is left to judge it.
         try:
             init = initialise(det, self.camera, self.layout)
             if not self._explains(self._state_of(init), init.labels, det):
@@ -175,11 +177,9 @@ class Tracker:
                 if np.array_equal(labels, init.labels) or (labels >= 0).sum() < _MIN_REFIT:
                     return None
                 init = initialise(det, self.camera, self.layout, labels=labels)
+                if not self._explains(self._state_of(init), init.labels, det):
+                    return None
         except InitialisationError:
-            return None
-        # A fit that leaves the blobs off the markers is no better than the prediction (a hand
-        # that no longer matches the layout): the innovation check is left to judge it.
-        if not self._explains(self._state_of(init), init.labels, det):
             return None
         return self.start_track(det, init)
 
@@ -194,11 +194,10 @@ class Tracker:
         blobs = np.flatnonzero(labels >= 0)
         if blobs.size == 0:
             return False
-        obs = self._observation(False)
-        markers = labels[blobs]
-        y = obs(x[None])[0].reshape(-1, 2)[markers]
-        radius = self.camera.fx * MARKER_DIAMETER_M / 2 / obs.marker_points(x[None])[0, markers, 2]
-        return bool(np.median(np.linalg.norm(det.uv[blobs] - y, axis=1) / radius) > 1.0)
+        pts = self._observation(False).marker_points(x[None])[0, labels[blobs]]
+        radius = self.camera.fx * MARKER_DIAMETER_M / 2 / pts[:, 2]
+        offset = np.linalg.norm(det.uv[blobs] - self.camera.project(pts), axis=1)
+        return bool(np.median(offset / radius) > 1.0)
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
         limit = _nis_limit(self.config.nis_quantile, 2 * np.unique(labels[labels >= 0]).size)
@@ -393,8 +392,8 @@ class Tracker:
                 self.model, self._observation(True), cfg.ukf, cfg.facing_cos, self.assoc_params
             )
             self._compiled = (compiled.load(), args)
-        gap = dt > LONG_GAP_S and self.config.gap_iterations
-        if not self._compiled_usable or det.depth is None or det.count == 0 or gap:
+        if (not self._compiled_usable or det.depth is None or det.count == 0
+                or self._gap_iterations(dt)):
             return None
         if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
             return None
@@ -411,9 +410,14 @@ class Tracker:
         """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)
         (tracking/generic_step.py)."""
         obs = self._observation(self.config.use_depth and det.depth is not None)
-        iterations = self.config.gap_iterations if dt > LONG_GAP_S else 0
         return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
-                                  self.assoc_params, self.camera, self.R_c0, iterations))
+                                  self.assoc_params, self.camera, self.R_c0,
+                                  self._gap_iterations(dt)))
+
+    def _gap_iterations(self, dt: float) -> int:
+        """How many times a step of ``dt`` s iterates its update: after a gap (LONG_GAP_S),
+        TrackerConfig.gap_iterations; else none (the compiled step's frames)."""
+        return self.config.gap_iterations if dt > LONG_GAP_S else 0
 
     # -------------------------------------------------------------------------------- output
 
