@@ -45,11 +45,13 @@ def rendered(cache: Path, name: str, seed: int = 0) -> Path:
     return folder
 
 
-def cut(folder: Path, frames: np.ndarray, dest: Path) -> Path:
-    """``dest``: the recording ``folder`` holding only its frames ``frames`` (in order); its
-    camera, images and hand.json linked, not copied."""
+def cut(folder: Path, frames, dest: Path, hand: bool = True) -> Path:
+    """``dest``: the recording ``folder`` holding only its frames ``frames`` (indices, in
+    order): frames.csv those rows, its camera, images and hand.json linked, not copied;
+    without hand.json where ``hand`` is False (as a camera SDK's file has none). The truth
+    files, which describe every frame, stay behind."""
     dest.mkdir(parents=True)
-    for name in ("camera.json", "hand.json", "rgb", "depth"):
+    for name in ("camera.json", "rgb", "depth") + (("hand.json",) if hand else ()):
         if (folder / name).exists():
             (dest / name).symlink_to((folder / name).resolve())
     lines = (folder / "frames.csv").read_text().splitlines()

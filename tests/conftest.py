@@ -43,25 +43,14 @@ def rendered(tmp_path_factory) -> Callable[..., Path]:
     return get
 
 
-def _cut_recording(folder: Path, frames, dest: Path, hand: bool = True) -> Path:
-    """``dest``: the recording ``folder`` cut to its frames ``frames`` (indices, in order): its
-    camera, images and hand.json linked, frames.csv holding those rows only; without hand.json
-    where ``hand`` is False (as a camera SDK's file has none). The truth files, which describe
-    every frame, stay behind."""
-    dest.mkdir()
-    for name in ("camera.json", "rgb", "depth") + (("hand.json",) if hand else ()):
-        if (folder / name).exists():
-            (dest / name).symlink_to(folder / name)
-    lines = (folder / "frames.csv").read_text().splitlines()
-    (dest / "frames.csv").write_text("\n".join([lines[0]] + [lines[1 + i] for i in frames]) + "\n")
-    return dest
-
-
 @pytest.fixture(scope="session")
 def cut_recording() -> Callable[..., Path]:
     """``cut_recording(folder, frames, dest, hand=True)``: a recording folder cut to some of its
-    frames (e.g. the ones a live run processed), without copying the images."""
-    return _cut_recording
+    frames (e.g. the ones a live run processed), without copying the images
+    (benchmarks.dropped.cut)."""
+    from benchmarks.dropped import cut
+
+    return cut
 
 
 @pytest.fixture(scope="session")
