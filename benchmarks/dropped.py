@@ -8,7 +8,9 @@ and scored against the truth:
 
 - random cuts: the first frame and 4-15 others drawn at random (gaps up to seconds), as a run
   that dropped most frames;
-- even cuts: every 4th, 7th and 10th frame (7.5, 4.3 and 3 fps).
+- even cuts: every 4th, 7th and 10th frame (7.5, 4.3 and 3 fps);
+- both again on the 'mix' movement with every camera and hand effect at its realistic strength
+  (benchmarks.robustness' "all (preset real)", rendered afresh).
 
 Per set: the frames reported as tracking, those more than GROSS_DEG off the truth on any wrist
 angle (a wrong pose reported as right), and the angle error's 99th percentile and maximum. What
@@ -25,12 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.robustness import render_condition
 from wristtrack.io.folder import FolderRecording
 from wristtrack.io.poses import read_poses
 from wristtrack.pipeline.track import track_recording
 from wristtrack.sim.render import render_recording
 
 RECORDINGS = ("reach", "no_hand")  # a fast reach; all three wrist axes ('mix')
+REALISTIC = "all (preset real)"  # benchmarks.robustness' condition: every effect, real strengths
 GROSS_DEG = 5.0
 RANDOM_CUTS = 60  # per the whole set, alternating the recordings
 STRIDES = (4, 7, 10)
@@ -69,6 +73,12 @@ def angle_errors(recording: Path, frames: np.ndarray, work: Path) -> np.ndarray:
     return np.column_stack([poses[a][tracked] - truth[a][frames[tracked]] for a in ANGLES])
 
 
+def _random_frames(rng: np.random.Generator, n: int) -> np.ndarray:
+    """The first of ``n`` frames and 4-15 others drawn at random, in order."""
+    k = int(rng.integers(4, 16))
+    return np.unique(np.concatenate(([0], rng.choice(np.arange(1, n), k, replace=False))))
+
+
 def _stats(errors: list[np.ndarray]) -> dict[str, Any]:
     worst = np.abs(np.concatenate(errors)).max(axis=1) if errors else np.zeros(0)
     return {
@@ -92,16 +102,22 @@ def bench_dropped(cache: Path | None = None, n_random: int = RANDOM_CUTS,
         for trial in range(n_random):
             name = RECORDINGS[trial % len(RECORDINGS)]
             n = n_frames[name]
-            k = int(rng.integers(4, 16))
-            frames = np.unique(np.concatenate(([0], rng.choice(np.arange(1, n), k,
-                                                               replace=False))))
-            sets["random"].append(angle_errors(recordings[name], frames,
+            sets["random"].append(angle_errors(recordings[name], _random_frames(rng, n),
                                                Path(tmp) / f"random-{trial}"))
         for stride in STRIDES:
             key = f"every {stride}th frame ({30 / stride:.1f} fps)"
             sets[key] = [angle_errors(f, np.arange(0, n_frames[name], stride),
                                       Path(tmp) / f"{name}-{stride}")
                          for name, f in recordings.items()]
+        real = render_condition(cache, REALISTIC, 0, None)
+        n = len((real / "frames.csv").read_text().splitlines()) - 1
+        rng = np.random.default_rng(seed + 1)
+        key = "random, every effect (preset real)"
+        sets[key] = [angle_errors(real, _random_frames(rng, n), Path(tmp) / f"real-random-{trial}")
+                     for trial in range(n_random // 2)]
+        sets["every 4th/7th/10th frame, every effect"] = [
+            angle_errors(real, np.arange(0, n, stride), Path(tmp) / f"real-every-{stride}")
+            for stride in STRIDES]
     return {"random_cuts": n_random, "sets": {k: _stats(v) for k, v in sets.items()}}
 
 
@@ -112,7 +128,9 @@ def dropped_section(result: dict[str, Any]) -> list[str]:
         "",
         f"The reach and the 'mix' movement (30 fps renders) cut to {result['random_cuts']} "
         "random subsets (the first frame and 4-15 others: gaps up to seconds, as a live run "
-        "that dropped most frames) and to evenly spaced frames, tracked as `track` does. "
+        "that dropped most frames) and to evenly spaced frames, tracked as `track` does; then "
+        f"the 'mix' with every effect at realistic strength ({result['random_cuts'] // 2} "
+        "random subsets, and the three even cuts together). "
         f"Gross: tracked frames more than {GROSS_DEG:.0f} deg off the truth on a wrist angle. "
         "Target: none.",
         "",
