@@ -49,17 +49,25 @@ def rendered(cache: Path, name: str, seed: int = 0) -> Path:
     return folder
 
 
-def cut(folder: Path, frames, dest: Path, hand: bool = True) -> Path:
+def cut(folder: Path, frames, dest: Path, hand: bool = True, without_depth=()) -> Path:
     """``dest``: the recording ``folder`` holding only its frames ``frames`` (indices, in
     order): frames.csv those rows, its camera, images and hand.json linked, not copied;
-    without hand.json where ``hand`` is False (as a camera SDK's file has none). The truth
-    files, which describe every frame, stay behind."""
+    without hand.json where ``hand`` is False (as a camera SDK's file has none); the frames
+    ``without_depth`` (indices of ``folder``) with an empty depth cell, as a camera that lost
+    their depth would have recorded them. The truth files, which describe every frame, stay
+    behind."""
     dest.mkdir(parents=True)
     for name in ("camera.json", "rgb", "depth") + (("hand.json",) if hand else ()):
         if (folder / name).exists():
             (dest / name).symlink_to((folder / name).resolve())
     lines = (folder / "frames.csv").read_text().splitlines()
-    (dest / "frames.csv").write_text("\n".join([lines[0], *(lines[1 + i] for i in frames)])
+    lost = {int(i) for i in without_depth}
+
+    def row(i: int) -> str:
+        line = lines[1 + i]
+        return line.rsplit(",", 1)[0] + "," if i in lost else line
+
+    (dest / "frames.csv").write_text("\n".join([lines[0], *(row(int(i)) for i in frames)])
                                      + "\n")
     return dest
 

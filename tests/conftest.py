@@ -45,9 +45,9 @@ def rendered(tmp_path_factory) -> Callable[..., Path]:
 
 @pytest.fixture(scope="session")
 def cut_recording() -> Callable[..., Path]:
-    """``cut_recording(folder, frames, dest, hand=True)``: a recording folder cut to some of its
-    frames (e.g. the ones a live run processed), without copying the images
-    (benchmarks.dropped.cut)."""
+    """``cut_recording(folder, frames, dest, hand=True, without_depth=())``: a recording folder
+    cut to some of its frames (e.g. the ones a live run processed), without copying the images,
+    optionally with some frames' depth left out (benchmarks.dropped.cut)."""
     from benchmarks.dropped import cut
 
     return cut

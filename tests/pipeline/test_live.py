@@ -123,6 +123,28 @@ def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
         np.testing.assert_allclose(again[col], offline[col], atol=1e-9, equal_nan=True)
 
 
+def test_frames_without_depth_are_tracked_on_colour_and_counted(reach, cut_recording, tmp_path,
+                                                                 capsys):
+    """A depth camera's frame that comes without depth (lost, or not of its colour frame's
+    moment: io.base.pairing_tolerance) is tracked on colour alone, as offline, and live.json
+    and the closing line say which."""
+    lost = [40, 41, 90]
+    gappy = cut_recording(reach, np.arange(len(FolderRecording(reach))), tmp_path / "gappy",
+                          without_depth=lost)
+    run = tmp_path / "run"
+    assert main(["track", "--live", f"replay:{gappy}", "--out", str(run), "--no-report"]) == 0
+    live = json.loads((run / "live.json").read_text())
+    poses = read_poses(run / "poses.csv")
+    processed = set(poses["frame"][poses["status"] != "dropped"].astype(int).tolist())
+    expected = [i for i in lost if i in processed]
+    assert expected, "a busy machine dropped every frame without depth: nothing was tested"
+    assert live["frames_without_depth"] == expected
+    assert live["frames"]["without_depth"] == len(expected)
+    assert f"{len(expected)} without depth (on colour alone)" in capsys.readouterr().out
+    assert set(poses["status"][np.isin(poses["frame"], expected)]) <= {"tracking", "coasting"}
+    _agree(poses, gappy, cut_recording, tmp_path, deg=0.5, mm=1.0)
+
+
 class Burst(Recording):
     """The first frames of a recording, decoded up front and delivered back to back (their own
     timestamps kept): a camera far faster than the tracker. 1 ms apart was not: the tracker,

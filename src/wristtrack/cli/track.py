@@ -121,9 +121,11 @@ def _track_live(args: argparse.Namespace) -> int:
     if live.get("source_error"):
         print(f"wristtrack track: the camera stopped: {live['source_error']}", file=sys.stderr)
     frames, lat = live["frames"], live["latency_ms"]
+    no_depth = (f", {frames['without_depth']} without depth (on colour alone)"
+                if frames["without_depth"] else "")
     print(f"tracked {summary['frames']['tracked']} of {frames['total']} frames "
-          f"({frames['dropped']} dropped); latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} "
-          f"ms; wrote {args.out}/poses.csv, summary.json and live.json")
+          f"({frames['dropped']} dropped{no_depth}); latency p50 {lat['p50']:.1f} ms, p95 "
+          f"{lat['p95']:.1f} ms; wrote {args.out}/poses.csv, summary.json and live.json")
     if live.get("record"):
         rec = live["record"]
         print(f"recorded {rec['frames']} frames to {rec['folder']}"

@@ -157,6 +157,15 @@ def check_depth(depth: np.ndarray, bgr: np.ndarray, where: str) -> np.ndarray:
     return depth
 
 
+def pairing_tolerance(fps: float) -> float:
+    """Seconds a depth frame's timestamp may be off its colour frame's and still show the same
+    moment: half a frame period at ``fps`` (30 if unknown). A camera's colour and depth
+    sensors are read apart, and a depth frame of the moment before or after places every
+    marker where the hand was then (at 1 m/s, 33 mm at 30 fps): such a colour frame goes
+    without depth."""
+    return 0.5 / (fps if fps and fps > 0 else 30.0)
+
+
 def reject_options(kind: str, source: Any, options: dict[str, Any]) -> None:
     """InputError for options the kind of recording does not take (e.g. a topic for a video)."""
     if options:

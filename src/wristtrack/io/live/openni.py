@@ -24,7 +24,7 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io.base import Frame, Recording, reject_options
+from wristtrack.io.base import Frame, Recording, pairing_tolerance, reject_options
 
 INSTALL = "pip install 'wristtrack[openni]'"
 RUNTIME = "apt-get install libopenni2-0 (Debian/Ubuntu) or set OPENNI2_REDIST64 to the SDK's Redist"
@@ -159,11 +159,11 @@ class OpenNIRecording(Recording):
             raise InputError(f"{self.source}: an OpenNI2 stream cannot start at frame {start}")
         index, t0 = 0, None
         # Colour and depth arrive as separate frames, in either order and sometimes two of one
-        # kind in a row: pair each colour frame with the depth frame of the same moment (within
-        # half a frame period). A colour frame whose depth is lost goes without depth.
+        # kind in a row: pair each colour frame with the depth frame of the same moment
+        # (pairing_tolerance). A colour frame whose depth is lost goes without depth.
         colors: deque[tuple[np.ndarray, float]] = deque()
         depths: deque[tuple[np.ndarray, float]] = deque(maxlen=4)
-        tolerance = 0.5 / (float(self._color.get_video_mode().fps) or 30.0)
+        tolerance = pairing_tolerance(float(self._color.get_video_mode().fps))
         while self.max_frames is None or index < self.max_frames:
             ready = self._ni.wait_for_any_stream(self._streams, FRAME_TIMEOUT_S)
             if ready is None:

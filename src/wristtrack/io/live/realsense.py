@@ -21,7 +21,7 @@ import numpy as np
 from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
-from wristtrack.io.base import Frame, Recording, reject_options
+from wristtrack.io.base import Frame, Recording, pairing_tolerance, reject_options
 
 INSTALL = "pip install 'wristtrack[realsense]'"
 RECORDING_SUFFIXES = (".bag", ".db3")
@@ -81,8 +81,9 @@ class RealSenseRecording(Recording):
     """A RealSense device (``serial`` or the first one found) or an SDK recording (``file``).
 
     A device streams ``width`` x ``height`` colour (BGR8) and depth (Z16) at ``fps``;
-    timestamps are the SDK's frame timestamps in seconds from the first frame. A recording
-    plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
+    timestamps are the SDK's frame timestamps in seconds from the first frame. A colour frame
+    whose depth frame is not of the same moment (``pairing_tolerance``) comes without depth. A
+    recording plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
     ``camera`` overrides the intrinsics read from the device.
     """
 
@@ -141,6 +142,7 @@ class RealSenseRecording(Recording):
             raise InputError(f"{name} has no colour stream; the tracker needs colour")
         self.has_depth = rs.stream.depth in streams
         intr = streams[rs.stream.color].as_video_stream_profile().get_intrinsics()
+        self._tolerance = pairing_tolerance(float(streams[rs.stream.color].fps()))
         scale = device.first_depth_sensor().get_depth_scale() if self.has_depth else 0.001
         self.device_name = device.get_info(rs.camera_info.name)
         if camera is None:
@@ -207,6 +209,10 @@ class RealSenseRecording(Recording):
                 continue
             last_number = number
             t = color.get_timestamp() / 1000.0  # ms -> s
+            if depth and abs(depth.get_timestamp() / 1000.0 - t) > self._tolerance:
+                # The SDK's syncer fills a lost depth frame with the last one it had (a dropped
+                # USB transfer, a late frame under load): that depth shows another moment.
+                depth = None
             t0 = t if t0 is None else t0
             if index < start:  # a resumed recording is read from its start, as it was played
                 index += 1

@@ -140,6 +140,9 @@ class LiveLog:
     processing_ms: list[float] = field(default_factory=list)  # taken from the slot -> written
     dropped: list[int] = field(default_factory=list)
     bad: list[int] = field(default_factory=list)
+    # processed frames of a depth camera that came without depth: their depth frame was lost
+    # or was not of their moment (io.base.pairing_tolerance); tracked on colour alone
+    without_depth: list[int] = field(default_factory=list)
 
     def add(self, frame: Frame, arrived: float, started: float, done: float) -> None:
         self.frame.append(frame.index)
@@ -179,6 +182,7 @@ class LiveLog:
                 "processed": len(self.frame),
                 "dropped": len(self.dropped),
                 "bad": len(self.bad),
+                "without_depth": len(self.without_depth),
             },
             "frame_period_ms": period,
             "latency_ms": {
@@ -190,6 +194,7 @@ class LiveLog:
             },
             "dropped_frames": self.dropped,
             "bad_frames": self.bad,
+            "frames_without_depth": self.without_depth,
             "per_frame": {
                 "frame": self.frame,
                 "timestamp": self.timestamp,
@@ -294,6 +299,8 @@ def track_live(
                     log.bad.append(frame.index)
                     skipped.append({"frame": frame.index, "error": frame.error})
                     continue
+                if source.has_depth and frame.depth is None:
+                    log.without_depth.append(frame.index)
                 det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
                 try:
                     result = tracker.step(det)
