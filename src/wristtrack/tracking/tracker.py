@@ -148,7 +148,7 @@ class Tracker:
     def _try_initialise(self, det: Detections, labels: np.ndarray | None) -> FrameResult:
         self.max_blobs_seen = max(self.max_blobs_seen, det.count)
         try:
-            init = initialise(det, self.camera, self.layout, labels=labels)
+            init = self._fit(det, labels)
         except InitialisationError as e:
             self.last_init_error = str(e)  # why the latest attempt failed, for the run's report
             return self._empty(det, self.status)
@@ -169,19 +169,28 @@ class Tracker:
         # A fit that leaves the blobs off the markers is no better than the prediction (a hand
         # that no longer matches the layout): the innovation check is left to judge it.
         try:
-            init = initialise(det, self.camera, self.layout)
+            init = self._fit(det)
             if not self._explains(self._state_of(init), init.labels, det):
                 # Suspect blobs (clipped, smeared) can pull the fit off the others (two blobs
                 # 2.4-3 px off on a fast reach left the fit 1.4 px rms): fit the others alone.
                 labels = noise_scale.undoubted(init.labels, det)
                 if np.array_equal(labels, init.labels) or (labels >= 0).sum() < _MIN_REFIT:
                     return None
-                init = initialise(det, self.camera, self.layout, labels=labels)
+                init = self._fit(det, labels)
                 if not self._explains(self._state_of(init), init.labels, det):
                     return None
         except InitialisationError:
             return None
         return self.start_track(det, init)
+
+    def _fit(self, det: Detections, labels: np.ndarray | None = None) -> InitResult:
+        """A fresh fit of this frame (tracking/initialise.py), its blobs taken at the filter's
+        pixel noise, as the still start and the colour re-fit take them. At initialise's own
+        0.7 px the fit leaned on depth for the out-of-plane angles: fresh fits after a long
+        gap with every realism effect were up to 6.8 deg off in pronation; at 0.3 px, 4.9
+        (benchmarks/dropped.py's cuts)."""
+        return initialise(det, self.camera, self.layout, labels=labels,
+                          pixel_sigma=self.config.measurement.pixel_sigma)
 
     def _state_of(self, init: InitResult) -> np.ndarray:
         """The state of an initialisation's pose (at rest), relative to W0."""
