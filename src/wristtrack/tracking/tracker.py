@@ -38,7 +38,7 @@ from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import MARKER_DIAMETER_M, HandLayout, fit_pose
 from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
 from wristtrack.tracking.config import TrackerConfig
-from wristtrack.tracking.generic_step import generic_step
+from wristtrack.tracking.generic_step import fit_covariance, generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import MODELS, ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
@@ -222,11 +222,14 @@ class Tracker:
                 self._still = StillStart(self.camera, det.timestamp)
         R = self.R_c0.T @ init.R_ch
         p = self.R_c0.T @ (init.t_ch - self.t_c0)
-        # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
-        rot = np.kron(np.eye(2), self.R_c0.T)
-        pose_cov = rot @ init.cov @ rot.T
         x = self.model.initial_state(R, p)
-        P = self.model.initial_covariance(pose_cov)
+        if self._initialisations:  # a fresh fit in W0: its uncertainty as the filter sees it
+            P = fit_covariance(self.model, self._observation(det.depth is not None), x, det,
+                               init.labels, self.config)
+        else:  # the first fixes W0; its uncertainty is carried apart (_result)
+            # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
+            rot = np.kron(np.eye(2), self.R_c0.T)
+            P = self.model.initial_covariance(rot @ init.cov @ rot.T)
         self._track = _Track(x, P, det.timestamp, R_prev=R)
         self._initialisations += 1
         self._track_id += 1
