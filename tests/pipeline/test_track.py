@@ -140,3 +140,23 @@ def test_a_frame_with_a_repeated_timestamp_is_marked_and_skipped(recordings, tmp
     assert cols["status"][20] == "skipped"
     assert (cols["status"][21:] == "tracking").all()
     assert summary["skipped_frames"][0]["frame"] == 20
+
+
+def test_frames_without_depth_are_tracked_on_colour_and_listed(recordings, tmp_path, capsys,
+                                                                 cut_recording, check_run):
+    """A depth recording whose frames 30-32 lost their depth (an empty depth cell, as a camera
+    that dropped them records it, or an SDK file whose depth was not of their moment): they are
+    tracked on colour alone, near the truth, and summary.json and the closing line say which."""
+    rec = recordings["flexion"]
+    n = len((rec / "frames.csv").read_text().splitlines()) - 1
+    gappy = cut_recording(rec, np.arange(n), tmp_path / "gappy", without_depth=[30, 31, 32])
+    capsys.readouterr()
+    summary = _track(gappy, tmp_path / "run")
+    assert summary["frames_without_depth"] == [30, 31, 32]
+    assert "(3 without depth, on colour alone)" in capsys.readouterr().out
+    assert subprocess.run([sys.executable, str(check_run), str(tmp_path / "run")]).returncode == 0
+    poses, truth = read_poses(tmp_path / "run" / "poses.csv"), read_poses(rec / "truth.csv")
+    assert set(poses["status"][30:33]) == {"tracking"}
+    for angle in ("deviation_deg", "flexion_deg", "pronation_deg"):
+        assert np.abs(poses[angle][30:33] - truth[angle][30:33]).max() < 1.0
+    assert _track(rec, tmp_path / "whole")["frames_without_depth"] == []

@@ -70,8 +70,10 @@ def _track(args: argparse.Namespace) -> int:
               "the same command with --resume to continue", file=sys.stderr)
         return 130
     frames = summary["frames"]
-    print(f"tracked {frames['tracked']} of {frames['total']} frames; wrote {args.out}/poses.csv "
-          f"and {args.out}/summary.json")
+    no_depth = summary.get("frames_without_depth") or []
+    print(f"tracked {frames['tracked']} of {frames['total']} frames"
+          + (f" ({len(no_depth)} without depth, on colour alone)" if no_depth else "")
+          + f"; wrote {args.out}/poses.csv and {args.out}/summary.json")
     for axis, rom in summary["range_of_motion"].items():
         if rom["range_deg"] is not None:
             print(f"  {axis:<10} {rom['min_deg']:7.1f} .. {rom['max_deg']:6.1f} deg "

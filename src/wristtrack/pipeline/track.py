@@ -86,7 +86,7 @@ def track_recording(
         rows = _Rows(writer, states, overlay, bar)
         try:
             interrupted = _frame_loop(recording.frames(start), run, labels, rows, checkpoints,
-                                      files)
+                                      files, recording.has_depth)
         finally:
             bar.close()
     return _finish(recording, out, run, config, settings, smooth, interrupted, checkpoints)
@@ -104,10 +104,14 @@ class _RunState:
     summary: SummaryAccumulator
     learned: bool = False  # the detector's colours were refined at the first fix
     bad_frames: list[dict[str, Any]] = field(default_factory=list)  # for summary.json
+    # frames of a recording with depth that came without (a lost depth frame, or one not of
+    # their moment: io.base.pairing_tolerance), tracked on colour alone; for summary.json
+    without_depth: list[int] = field(default_factory=list)
 
     def saved(self) -> dict[str, Any]:
         return {"detector": self.detector, "tracker": self.tracker, "summary": self.summary,
-                "learned": self.learned, "bad_frames": self.bad_frames}
+                "learned": self.learned, "bad_frames": self.bad_frames,
+                "without_depth": self.without_depth}
 
 
 def _output_folder(out: str | Path) -> Path:
@@ -172,8 +176,10 @@ def _frame_loop(
     rows: _Rows,
     checkpoints: ckpt.Checkpointer,
     files: list[Path],
+    has_depth: bool,
 ) -> bool:
-    """Track ``frames`` one by one; True if the run was interrupted (Ctrl-C, SIGTERM)."""
+    """Track ``frames`` one by one (of a recording with depth where ``has_depth``); True if the
+    run was interrupted (Ctrl-C, SIGTERM)."""
     with DeferredInterrupt() as stop:
         try:
             for frame in frames:
@@ -183,6 +189,8 @@ def _frame_loop(
                     checkpoints.save(frame.index, files, run.saved())
                     if stop.requested:
                         return True
+                if has_depth and frame.ok and frame.depth is None:
+                    run.without_depth.append(frame.index)
                 _track_frame(frame, run, labels, rows)
                 rows.bar.update(1)
         except KeyboardInterrupt:  # a second Ctrl-C: the last periodic checkpoint stands
@@ -249,6 +257,7 @@ def _finish(
         source=str(recording.source),
         settings=settings,
         skipped_frames=run.bad_frames,
+        frames_without_depth=run.without_depth,
         # what the tracker must say about its poses, e.g. an unresolved planar flip
         warnings=list(getattr(tracker, "warnings", [])),
         # the markers' noise as the recording showed it (tracking/noise_scale.py)

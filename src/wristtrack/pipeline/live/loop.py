@@ -345,6 +345,7 @@ def track_live(
         source=str(source.source),
         settings={**settings_dict(config), "smoothed": False, "live": True},
         skipped_frames=skipped,
+        frames_without_depth=log.without_depth,
         warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
