@@ -74,13 +74,8 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
             local = assoc.associate_paper(llr, assoc_params)
         labels = np.full(det.count, assoc.CLUTTER)
         labels[local >= 0] = marker_ids[local[local >= 0]]
-        rows, values = observation.stacked_rows(labels, z, k)
-        if rows.size:
-            R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
-            res = ukf.update(model, x, P, pred, values, R_u, rows=rows)
-            if iterations:
-                res = ukf.iterated_update(model, prior, (res.x, res.P), obs, values, R_u, rows,
-                                          config.ukf, iterations)
+        res = _labelled_update(model, obs, prior, pred, R, det, z, labels, config, iterations)
+        if res is not None:
             x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
     n_assoc = int(np.unique(labels[labels >= 0]).size)
@@ -103,19 +98,32 @@ def fit_covariance(model, obs: MarkerObservation, x: np.ndarray, det: Detections
     0.9-1.6 (benchmarks/dropped.py's cuts). The velocities keep the prior's spread."""
     pose = np.diag([_FIT_PRIOR_ROT**2] * 3 + [_FIT_PRIOR_POS**2] * 3)
     P = model.initial_covariance(pose)
-    z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
-    rows, values = observation.stacked_rows(labels, z, obs.k)
-    if rows.size == 0:
-        return P
     pred = ukf.predict_measurement(model, x, P, obs, config.ukf)
     R = np.diag(obs.noise_variance(pred.y)) + obs.shared_covariance(x)
-    R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
-    post = ukf.update(model, x, P, pred, values, R_u, rows=rows)
+    z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
     # Linearised over the wide prior, h's curvature there counts as noise (rotation sigmas
     # 1.5x too wide on a tilted hand): linearise it over the posterior instead.
-    post = ukf.iterated_update(model, (x, P), (post.x, post.P), obs, values, R_u, rows,
-                               config.ukf, _FIT_ITERATIONS)
-    return post.P
+    post = _labelled_update(model, obs, (x, P), pred, R, det, z, labels, config,
+                            _FIT_ITERATIONS)
+    return P if post is None else post.P
+
+
+def _labelled_update(model, obs: MarkerObservation, prior: tuple[np.ndarray, np.ndarray],
+                     pred: ukf.MeasurementPrediction, R: np.ndarray, det: Detections,
+                     z: np.ndarray, labels: np.ndarray, config: TrackerConfig,
+                     iterations: int) -> ukf.UpdateResult | None:
+    """The update of ``prior`` (its measurement prediction ``pred``, the full noise ``R``) with
+    the blobs ``z`` of ``det`` that ``labels`` names as markers, corrected ``iterations`` more
+    times over its posterior (ukf.iterated_update); None where no blob is a marker."""
+    rows, values = observation.stacked_rows(labels, z, obs.k)
+    if rows.size == 0:
+        return None
+    R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
+    res = ukf.update(model, *prior, pred, values, R_u, rows=rows)
+    if iterations:
+        res = ukf.iterated_update(model, prior, (res.x, res.P), obs, values, R_u, rows,
+                                  config.ukf, iterations)
+    return res
 
 
 def expected_markers(model, obs: MarkerObservation, x: np.ndarray, R_c0: np.ndarray,

@@ -220,9 +220,7 @@ class Tracker:
             self.layout = init.layout
             if type(self.model) is ConstantRateModel:
                 self._still = StillStart(self.camera, det.timestamp)
-        R = self.R_c0.T @ init.R_ch
-        p = self.R_c0.T @ (init.t_ch - self.t_c0)
-        x = self.model.initial_state(R, p)
+        x = self._state_of(init)
         if self._initialisations:  # a fresh fit in W0: its uncertainty as the filter sees it
             P = fit_covariance(self.model, self._observation(det.depth is not None), x, det,
                                init.labels, self.config)
@@ -230,7 +228,7 @@ class Tracker:
             # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
             rot = np.kron(np.eye(2), self.R_c0.T)
             P = self.model.initial_covariance(rot @ init.cov @ rot.T)
-        self._track = _Track(x, P, det.timestamp, R_prev=R)
+        self._track = _Track(x, P, det.timestamp, R_prev=self.R_c0.T @ init.R_ch)
         self._initialisations += 1
         self._track_id += 1
         self.status = Status.TRACKING
