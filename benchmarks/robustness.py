@@ -102,31 +102,40 @@ def robustness(
 ) -> dict[str, dict[str, dict[str, float]]]:
     """condition -> tracker -> metrics (mean over seeds): rot, pos, rom, cover, recall, and
     for the default tracker ``wrong_side`` (frames whose estimate reports the other hand)."""
-    trackers = TRACKERS if trackers is None else trackers
     out: dict[str, dict[str, dict[str, float]]] = {}
     for condition in conditions or tuple(CONDITIONS):
-        rows = dict(trackers)
-        if condition.startswith("all") and "default" in trackers:
-            rows.update(COMBINED_EXTRA)
-        per: dict[str, list[dict[str, float]]] = {label: [] for label in rows}
-        for seed in seeds:
-            folder = render_condition(cache, condition, seed, n_frames)
-            camera, hand, detections, truth = recorded_detections(folder)
-            uv, vis = _truth_markers(folder)
-            side = "left" if CONDITIONS[condition].get("hand_side") == "left" else "right"
-            for label, row_name in rows.items():
-                row: Row = ACCURACY_ROWS[row_name]
-                results = row.run(camera, hand, detections)
-                m = score(results, truth)
-                m["recall"] = recall(results, detections, uv, vis)
-                est = [r for r in results if r.has_estimate]
-                m["wrong_side"] = float(np.mean([r.side != side for r in est])) if est else 0.0
-                per[label].append(m)
+        per = per_seed(cache, condition, seeds, n_frames, trackers)
         out[condition] = {
             label: {key: _mean([m[key] for m in ms]) for key in ms[0]}
             for label, ms in per.items()
         }
     return out
+
+
+def per_seed(
+    cache: Path, condition: str, seeds: tuple[int, ...], n_frames: int | None = None,
+    trackers: dict[str, str] | None = None,
+) -> dict[str, list[dict[str, float]]]:
+    """tracker -> each seed's metrics on ``condition`` (a combined condition also gets the
+    default tracker's smoothed row)."""
+    rows = dict(TRACKERS if trackers is None else trackers)
+    if condition.startswith("all") and "default" in rows:
+        rows.update(COMBINED_EXTRA)
+    per: dict[str, list[dict[str, float]]] = {label: [] for label in rows}
+    side = "left" if CONDITIONS[condition].get("hand_side") == "left" else "right"
+    for seed in seeds:
+        folder = render_condition(cache, condition, seed, n_frames)
+        camera, hand, detections, truth = recorded_detections(folder)
+        uv, vis = _truth_markers(folder)
+        for label, row_name in rows.items():
+            row: Row = ACCURACY_ROWS[row_name]
+            results = row.run(camera, hand, detections)
+            m = score(results, truth)
+            m["recall"] = recall(results, detections, uv, vis)
+            est = [r for r in results if r.has_estimate]
+            m["wrong_side"] = float(np.mean([r.side != side for r in est])) if est else 0.0
+            per[label].append(m)
+    return per
 
 
 def _mean(values: list[float]) -> float:

@@ -164,6 +164,14 @@ def _robustness(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     return summary_lines(f["robustness"]), section
 
 
+def _spread(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
+    from benchmarks.seed_spread import SPREAD_SEEDS, seed_spread, spread_section
+
+    seeds = tuple(range(2 if ctx.quick else max(SPREAD_SEEDS, len(ctx.seeds))))
+    result = seed_spread(ctx.cache, seeds, n_frames=60 if ctx.quick else None)
+    return spread_section(result, seeds, table_seeds=len(ctx.seeds))
+
+
 def _batch(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     section = _batch_section(f, ctx.quick)
     lines: list[str] = []
@@ -208,6 +216,7 @@ SECTIONS: dict[str, Section] = {  # in the document's order
     "simulated": _simulated,
     "rendered": _rendered,
     "robustness": _robustness,
+    "spread": _spread,
     "batch": _batch,
     "live": _live,
     "dropped": _dropped,
