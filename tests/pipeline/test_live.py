@@ -140,7 +140,7 @@ def test_frames_without_depth_are_tracked_on_colour_and_counted(reach, cut_recor
     assert expected, "a busy machine dropped every frame without depth: nothing was tested"
     assert live["frames_without_depth"] == expected
     assert live["frames"]["without_depth"] == len(expected)
-    assert f"{len(expected)} without depth (on colour alone)" in capsys.readouterr().out
+    assert f"{len(expected)} without depth, on colour alone)" in capsys.readouterr().out
     assert set(poses["status"][np.isin(poses["frame"], expected)]) <= {"tracking", "coasting"}
     _agree(poses, gappy, cut_recording, tmp_path, deg=0.5, mm=1.0)
 

@@ -123,7 +123,7 @@ def _track_live(args: argparse.Namespace) -> int:
     if live.get("source_error"):
         print(f"wristtrack track: the camera stopped: {live['source_error']}", file=sys.stderr)
     frames, lat = live["frames"], live["latency_ms"]
-    no_depth = (f", {frames['without_depth']} without depth (on colour alone)"
+    no_depth = (f", {frames['without_depth']} without depth, on colour alone"
                 if frames["without_depth"] else "")
     print(f"tracked {summary['frames']['tracked']} of {frames['total']} frames "
           f"({frames['dropped']} dropped{no_depth}); latency p50 {lat['p50']:.1f} ms, p95 "
