@@ -182,3 +182,32 @@ def test_the_iterated_update_reaches_the_map_estimate_that_one_update_stops_shor
     K = P0 @ H.T @ np.linalg.inv(H @ P0 @ H.T + R)
     np.testing.assert_allclose(again.x, x0 + K @ (z - H @ x0), atol=1e-10)
     np.testing.assert_allclose(again.P, P0 - K @ H @ P0, atol=1e-10)
+
+
+def test_a_linear_map_of_a_prediction_is_the_prediction_of_the_mapped_measurement():
+    """Averaging or selecting predicted measurements (merged blobs, associated markers) needs no
+    second unscented transform: the mapped prediction equals the transform of A h, and so does
+    the update with it (the iterated update with rows=None taking A h as its h)."""
+    rng = np.random.default_rng(3)
+    model = ukf.EuclideanModel(3, lambda X, N, dt: X)
+
+    def h(X):
+        return np.column_stack((np.sin(X[:, 0]) * X[:, 1], X[:, 2] ** 2, X[:, 0] + X[:, 1]))
+
+    A = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]])
+    x0, P0 = rng.standard_normal(3), np.diag([0.2, 0.3, 0.1])
+
+    def mapped_h(X):
+        return h(X) @ A.T
+
+    direct = ukf.predict_measurement(model, x0, P0, mapped_h)
+    mapped = ukf.predict_measurement(model, x0, P0, h).mapped(A)
+    for a, b in ((mapped.y, direct.y), (mapped.Pyy, direct.Pyy), (mapped.Pxy, direct.Pxy)):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14)
+    z, R = direct.y + [0.05, -0.02], np.diag([0.01, 0.02])
+    once = ukf.update(model, x0, P0, mapped, z, R)
+    np.testing.assert_allclose(once.x, ukf.update(model, x0, P0, direct, z, R).x, rtol=1e-12)
+    again = ukf.iterated_update(model, (x0, P0), (once.x, once.P), mapped_h, z, R, None)
+    rows_again = ukf.iterated_update(model, (x0, P0), (once.x, once.P), mapped_h, z, R,
+                                     np.arange(2))
+    np.testing.assert_array_equal(again.x, rows_again.x)

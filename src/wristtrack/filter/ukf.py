@@ -159,12 +159,18 @@ class MeasurementPrediction:
 
     ``Y`` (S, m) are the transformed sigma points; ``y`` (m,) their mean; ``Pyy`` (m, m) their
     spread (without measurement noise); ``Pxy`` (n, m) the state-measurement cross-covariance.
-    Rows may later be selected (visible or associated markers) without transforming again.
+    Rows may later be selected (visible or associated markers) without transforming again, or
+    combined linearly (``mapped``).
     """
 
     y: np.ndarray
     Pyy: np.ndarray
     Pxy: np.ndarray
+
+    def mapped(self, A: np.ndarray) -> MeasurementPrediction:
+        """The prediction of A y, A (r, m): exact for a linear map (A y's sigma points are A's
+        image of y's), so no second unscented transform is needed."""
+        return MeasurementPrediction(A @ self.y, A @ self.Pyy @ A.T, self.Pxy @ A.T)
 
 
 def predict_measurement(
@@ -252,7 +258,7 @@ def iterated_update(
     h,
     z: np.ndarray,
     R: np.ndarray,
-    rows: np.ndarray,
+    rows: np.ndarray | None,
     params: UKFParams = UKFParams(),
     iterations: int = 1,
 ) -> UpdateResult:
@@ -263,15 +269,17 @@ def iterated_update(
     covariance Omega, and the prior (x0, P0) is corrected with it. A prior far from the truth
     (a long gap) meets h where its curvature matters, and one unscented correction stops short;
     the posterior is near enough for the linear model to hold. ``rows`` select the measured rows
-    of h, ``R`` (k, k) their noise; each iteration starts from the last posterior. The prior's
-    covariance is taken in the posterior's tangent space as it is (no transport)."""
+    of h (None: all), ``R`` (k, k) their noise; each iteration starts from the last posterior.
+    The prior's covariance is taken in the posterior's tangent space as it is (no transport)."""
     if iterations < 1:
         raise ValueError(f"iterated_update needs at least one iteration, got {iterations}")
     x0, P0 = prior
     x1, P1 = posterior
     for _ in range(iterations):
         pred = predict_measurement(model, x1, P1, h, params)
-        y, Pyy, Pxy = pred.y[rows], pred.Pyy[np.ix_(rows, rows)], pred.Pxy[:, rows]
+        y, Pyy, Pxy = pred.y, pred.Pyy, pred.Pxy
+        if rows is not None:
+            y, Pyy, Pxy = y[rows], Pyy[np.ix_(rows, rows)], Pxy[:, rows]
         H = np.linalg.solve(P1, Pxy).T  # statistical linearisation: Pxy = P1 H^T
         S = H @ P0 @ H.T + (Pyy - H @ P1 @ H.T) + R
         d0 = model.lift(x1, x0[None])[0]

@@ -26,7 +26,7 @@ import numpy as np
 
 from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
-from wristtrack.tracking import kernel
+from wristtrack.tracking import kernel, merged
 from wristtrack.tracking.kernel import (
     _CX,
     _CY,
@@ -40,6 +40,7 @@ from wristtrack.tracking.kernel import (
     _GATE_CONSTANT,
     _GRAZING_COS,
     _HALF_GATE,
+    _MERGE_REACH,
     _N_PAR,
     _PIXEL_VAR,
     _REGISTRATION_PX,
@@ -66,10 +67,12 @@ def frame_constants(
     ukf_params: ukf.UKFParams,
     facing_cos: float,
     assoc_params: assoc.AssociationParams,
+    merged_blobs: bool = True,
 ) -> tuple:
     """The step's arguments after (x, P, dt, uv, depth) for one tracker (fixed W0 and layout):
     layout (J, 3), its skin slide (J, 3), R_c0, t_c0, the unscented weights and the scalar
-    constants ``par``."""
+    constants ``par``. ``merged_blobs``: TrackerConfig.merged_blobs (the step leaves frames
+    where blobs may have merged to the generic path)."""
     n = model.dim + model.noise_dim
     w = ukf.sigma_weights(n, ukf_params.alpha, ukf_params.beta, ukf_params.kappa)
     gate_constant, half_gate = assoc.full_measurement_constants(assoc_params)
@@ -86,6 +89,7 @@ def frame_constants(
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
+    par[_MERGE_REACH] = merged.merge_reach(camera.fx) if merged_blobs else 0.0
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
     # The tracker makes these again whenever the noise it learns changes (tracking/noise_scale.py)
     layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)

@@ -50,6 +50,10 @@ class TrackerConfig:
     # off, and one unscented correction stops short: the update is iterated this many times
     # over its posterior (ukf.iterated_update). 0: one update, the paper's way.
     gap_iterations: int = 2
+    # A blob where two or three markers seen close together merged is taken as the mean of
+    # their centres (tracking/merged.py), with one-to-one association. False: as the one marker
+    # the association gave it to, the paper's way.
+    merged_blobs: bool = True
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -89,6 +93,7 @@ class TrackerConfig:
         kw.setdefault("manoeuvre_accel", ())
         kw.setdefault("reacquire", False)
         kw.setdefault("gap_iterations", 0)
+        kw.setdefault("merged_blobs", False)
         kw.setdefault("adapt_pixel", False)
         kw.setdefault("surface", None)
         kw.setdefault("model", "paper")  # or "paper_rpy": roll-pitch-yaw angles

@@ -4,7 +4,8 @@ The reference the compiled step (tracking/compiled.py, kernel.py) is tested agai
 path every configuration and frame it declines takes: any state model, the paper's association
 or JPDA, colour alone. It reads like the paper: the unscented prediction of the state and of
 each marker's measurement, each blob scored against each marker that can be seen, the pairs
-chosen, and one update with all the chosen pairs. The tracker (tracking/tracker.py) decides
+chosen, and one update with all the chosen pairs (a blob where markers merged measuring the
+mean of theirs: tracking/merged.py). The tracker (tracking/tracker.py) decides
 what to do with the result (the manoeuvre retry, the NIS test, the skin's depth update).
 """
 
@@ -18,7 +19,7 @@ from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
-from wristtrack.tracking import observation
+from wristtrack.tracking import merged
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.observation import MarkerObservation
 
@@ -74,7 +75,13 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
             local = assoc.associate_paper(llr, assoc_params)
         labels = np.full(det.count, assoc.CLUTTER)
         labels[local >= 0] = marker_ids[local[local >= 0]]
-        res = _labelled_update(model, obs, prior, pred, R, det, z, labels, config, iterations)
+        groups = {}
+        if config.merged_blobs and config.association == "gnn":
+            y_all = pred.y.reshape(n_markers, k)
+            diameter = merged.marker_diameters(camera.fx, obs.marker_points(x[None])[0, :, 2])
+            groups = merged.merged_groups(y_all[:, :2], diameter, expected, labels, det.uv)
+        res = _labelled_update(model, obs, prior, pred, R, det, z, labels, config, iterations,
+                               groups)
         if res is not None:
             x, P, nis, dof = res.x, res.P, res.nis, res.dof
 
@@ -111,19 +118,37 @@ def fit_covariance(model, obs: MarkerObservation, x: np.ndarray, det: Detections
 def _labelled_update(model, obs: MarkerObservation, prior: tuple[np.ndarray, np.ndarray],
                      pred: ukf.MeasurementPrediction, R: np.ndarray, det: Detections,
                      z: np.ndarray, labels: np.ndarray, config: TrackerConfig,
-                     iterations: int) -> ukf.UpdateResult | None:
+                     iterations: int, groups: dict[int, np.ndarray] | None = None,
+                     ) -> ukf.UpdateResult | None:
     """The update of ``prior`` (its measurement prediction ``pred``, the full noise ``R``) with
-    the blobs ``z`` of ``det`` that ``labels`` names as markers, corrected ``iterations`` more
-    times over its posterior (ukf.iterated_update); None where no blob is a marker."""
-    rows, values = observation.stacked_rows(labels, z, obs.k)
-    if rows.size == 0:
+    the blobs ``z`` of ``det`` that ``labels`` names as markers (a blob of ``groups`` as the
+    mean of its markers, tracking/merged.py), corrected ``iterations`` more times over its
+    posterior (ukf.iterated_update); None where no blob is a marker."""
+    A, values, blob, component = merged.measurement_map(labels, z, obs.k, obs.n_markers, groups)
+    if values.size == 0:
         return None
-    R_u = observation.update_noise(obs, R[np.ix_(rows, rows)], labels, z, det.suspect)
-    res = ukf.update(model, *prior, pred, values, R_u, rows=rows)
+    R_u = A @ R @ A.T + np.diag(_blob_variance(obs, det, blob, component, pred, groups))
+    res = ukf.update(model, *prior, pred.mapped(A), values, R_u)
     if iterations:
-        res = ukf.iterated_update(model, prior, (res.x, res.P), obs, values, R_u, rows,
-                                  config.ukf, iterations)
+        res = ukf.iterated_update(model, prior, (res.x, res.P), lambda X: obs(X) @ A.T,
+                                  values, R_u, None, config.ukf, iterations)
     return res
+
+
+def _blob_variance(obs: MarkerObservation, det: Detections, blob: np.ndarray,
+                   component: np.ndarray, pred: ukf.MeasurementPrediction,
+                   groups: dict[int, np.ndarray] | None) -> np.ndarray:
+    """(r,) what each row's blob adds to the update's noise: its pixel rows the blob's own
+    ``obs.blob_variance``, a merged blob's rows the spread of its centre about its markers'
+    mean (merged.merge_variance)."""
+    added = obs.blob_variance(det.suspect, det.count)[blob] * (component < 2)
+    if groups:
+        y = pred.y.reshape(obs.n_markers, obs.k)
+        extra = merged.merge_variance(y[:, :2], y[:, 2] if obs.k == 3 else None, groups)
+        for b, var in extra.items():
+            rows = blob == b
+            added[rows] += var[component[rows]]
+    return added
 
 
 def expected_markers(model, obs: MarkerObservation, x: np.ndarray, R_c0: np.ndarray,

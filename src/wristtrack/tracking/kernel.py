@@ -12,7 +12,8 @@ compiled (tracking/compiled.py), the frame is one call. Equal to the generic ste
 Only the common frame is handled here. ``step`` returns DECLINED, having changed nothing, where
 the generic path has a branch this does not copy: a covariance that is not positive definite
 (its Cholesky fallbacks), a marker out of view, a NaN distance or two markers wanting one blob
-(the assignment solver). The tracker then runs the generic path on the same frame.
+(the assignment solver), a marker without a blob crowding one with a blob (the blob may show
+both: tracking/merged.py). The tracker then runs the generic path on the same frame.
 
 The quaternion helpers are geometry's (``*_into``) and the depth noise is
 depth_noise.depth_sigma: compiled.py compiles those very functions with these.
@@ -39,8 +40,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
-    _REGISTRATION_PX, _GRAZING_COS, _N_PAR,
-) = range(20)  # fmt: skip
+    _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _N_PAR,
+) = range(21)  # fmt: skip
 
 
 # ------------------------------------------------------------------------ small helpers
@@ -91,7 +92,7 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
 
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance; dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
-    each blob adds to its marker's in the update (observation.update_noise); layout (J, 3) the
+    each blob adds to its marker's in the update (generic_step._blob_variance); layout (J, 3) the
     markers in the hand frame; slide (J, 3) each marker's share in the common skin slide
     (MarkerObservation.slide); R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented
     weights, S = 37 sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
@@ -127,7 +128,7 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
     _add_noise(C, mean, layout.shape[0], par)  # C's measurement block: Pyy + each blob's noise
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
-    if n_pairs < 0:
+    if n_pairs < 0 or _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
         return DECLINED, x_out, P_out, labels, 0, np.nan
     _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par)  # and now Pyy + R
 
@@ -290,6 +291,31 @@ def _all_visible(q, pvw, layout, R_c0, t_c0, par):
         if not (facing > par[_FACING_COS] and -0.5 <= u < par[_U_MAX] and -0.5 <= v < par[_V_MAX]):
             return False
     return True
+
+
+def _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
+    """Whether a marker left without a blob crowds one with a blob (predicted centres closer
+    than par[_MERGE_REACH] / their mean depth, merged.MERGE_DIAMETERS marker diameters): the
+    blob may show both, which generic_step decides (tracking/merged.py)."""
+    if par[_MERGE_REACH] <= 0.0:
+        return False
+    J = layout.shape[0]
+    Rc = np.empty((3, 3))
+    tc = np.empty(3)
+    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
+    z = np.empty(J)
+    for j in range(J):
+        z[j] = Rc[2, 0] * layout[j, 0] + Rc[2, 1] * layout[j, 1] + Rc[2, 2] * layout[j, 2] + tc[2]
+    for j in range(J):
+        if blob_of[j] >= 0:
+            continue
+        for i in range(J):
+            if blob_of[i] < 0:
+                continue
+            du, dv = mean[i] - mean[j], mean[J + i] - mean[J + j]
+            if math.sqrt(du * du + dv * dv) * 0.5 * (z[i] + z[j]) < par[_MERGE_REACH]:
+                return True
+    return False
 
 
 def _add_noise(C, mean, J, par):
@@ -460,6 +486,6 @@ def _write_state(q, pvw, out):
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
     "depth_sigma", "_cholesky", "_forward", "_sigma_points", "_moments", "_predicted",
-    "_camera_pose", "_all_visible", "_add_noise", "_add_shared_noise", "_associate", "_correct",
-    "_write_state",
+    "_camera_pose", "_all_visible", "_may_merge", "_add_noise", "_add_shared_noise",
+    "_associate", "_correct", "_write_state",
 )  # fmt: skip

@@ -266,12 +266,3 @@ def stacked_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray,
     values = z[blobs]
     ok = np.isfinite(values)
     return rows[ok], values[ok]
-
-
-def update_noise(obs: MarkerObservation, R: np.ndarray, labels: np.ndarray, z: np.ndarray,
-                 suspect: np.ndarray | None) -> np.ndarray:
-    """The update's measurement noise: ``R`` (``stacked_rows``' rows of the full noise) with
-    each blob's pixel rows raised by its ``obs.blob_variance``."""
-    blobs = np.flatnonzero(labels >= 0)
-    added = obs.blob_variance(suspect, len(labels))[blobs, None] * (np.arange(obs.k) < 2)
-    return R + np.diag(added[np.isfinite(z[blobs])])

@@ -399,7 +399,8 @@ class Tracker:
             )
         if self._compiled_usable and self._compiled is None:
             args = compiled.frame_constants(
-                self.model, self._observation(True), cfg.ukf, cfg.facing_cos, self.assoc_params
+                self.model, self._observation(True), cfg.ukf, cfg.facing_cos, self.assoc_params,
+                cfg.merged_blobs,
             )
             self._compiled = (compiled.load(), args)
         if (not self._compiled_usable or det.depth is None or det.count == 0
