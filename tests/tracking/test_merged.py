@@ -123,9 +123,10 @@ def test_the_compiled_step_leaves_a_frame_with_overlapping_markers_to_the_generi
 
 @pytest.mark.parametrize("merged_blob", [True, False])
 def test_a_merged_blob_measures_the_mean_of_its_markers(merged_blob):
-    """Against the true pose: taken as the one marker it was given to, the merged blob (3 px
-    from it) pulls the update off by a degree; taken as the mean of the two, the update lands
-    within a tenth of one. Where each marker has its own blob nothing changes."""
+    """Against the true pose, one update from a prior 1.1 deg off: taken as the one marker it
+    was given to, the merged blob (3 px from it) leaves the update 0.7 deg off; taken as the
+    mean of the two, 0.09, as close as with a blob for each marker (0.08). Where each marker
+    has its own blob nothing changes."""
     errors = {}
     for on in (True, False):
         tracker, x, P, truth, det = _overlap_frame(merged_blob)
@@ -134,9 +135,9 @@ def test_a_merged_blob_measures_the_mean_of_its_markers(merged_blob):
         R_post, R_true = (tracker.model.pose(s[None])[0][0] for s in (post, truth))
         errors[on] = np.degrees(rotation_angle(R_post.T @ R_true))
     if merged_blob:
-        assert errors[True] < 0.1 < 0.5 < errors[False], errors
+        assert errors[True] < 0.15 and errors[True] < 0.25 * errors[False], errors
     else:
-        assert errors[True] == errors[False] < 0.1, errors
+        assert errors[True] == errors[False] < 0.15, errors
 
 
 def test_a_left_hand_whose_knuckle_markers_line_up_is_tracked_through_it(tmp_path):
