@@ -76,7 +76,9 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
         labels = np.full(det.count, assoc.CLUTTER)
         labels[local >= 0] = marker_ids[local[local >= 0]]
         groups = {}
-        if config.merged_blobs and config.association == "gnn":
+        # only a marker left without a blob can share one (and most frames have none)
+        unmatched = np.count_nonzero(expected) > np.count_nonzero(labels >= 0)
+        if config.merged_blobs and config.association == "gnn" and unmatched:
             y_all = pred.y.reshape(n_markers, k)
             diameter = merged.marker_diameters(camera.fx, obs.marker_points(x[None])[0, :, 2])
             groups = merged.merged_groups(y_all[:, :2], diameter, expected, labels, det.uv)
