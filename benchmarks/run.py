@@ -172,6 +172,15 @@ def _spread(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     return spread_section(result, seeds, table_seeds=len(ctx.seeds))
 
 
+def _budget(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
+    from benchmarks.error_budget import error_budget, error_budget_section
+    from benchmarks.seed_spread import SPREAD_SEEDS
+
+    seeds = tuple(range(2 if ctx.quick else max(SPREAD_SEEDS, len(ctx.seeds))))
+    result = error_budget(ctx.cache, seeds, ctx.seeds, n_frames=60 if ctx.quick else None)
+    return [], error_budget_section(result, seeds, ctx.seeds)
+
+
 def _batch(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     section = _batch_section(f, ctx.quick)
     lines: list[str] = []
@@ -217,6 +226,7 @@ SECTIONS: dict[str, Section] = {  # in the document's order
     "rendered": _rendered,
     "robustness": _robustness,
     "spread": _spread,
+    "budget": _budget,
     "batch": _batch,
     "live": _live,
     "dropped": _dropped,
