@@ -243,3 +243,10 @@ def _findings(result: Result) -> list[str]:
                 f"{d['rot']:.3f} deg, the one with its pixel noise fixed {tn['rot']:.3f} -> "
                 f"{t['rot']:.3f}.")
     return out
+
+
+def summary_lines(result: Result) -> list[str]:
+    """The budget's lines for the document's summary: what exact pixels and exact depth do to
+    each every-effect condition's worst range-of-motion error."""
+    return [line.replace("- ", "- Error budget, ", 1) for line in _findings(result)
+            if line.startswith(tuple(f"- {c}:" for c in BUDGET_CONDITIONS))]

@@ -173,12 +173,12 @@ def _spread(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
 
 
 def _budget(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
-    from benchmarks.error_budget import error_budget, error_budget_section
+    from benchmarks.error_budget import error_budget, error_budget_section, summary_lines
     from benchmarks.seed_spread import SPREAD_SEEDS
 
     seeds = tuple(range(2 if ctx.quick else max(SPREAD_SEEDS, len(ctx.seeds))))
     result = error_budget(ctx.cache, seeds, ctx.seeds, n_frames=60 if ctx.quick else None)
-    return [], error_budget_section(result, seeds, ctx.seeds)
+    return summary_lines(result), error_budget_section(result, seeds, ctx.seeds)
 
 
 def _batch(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
