@@ -2,8 +2,9 @@
 error taken away at a time.
 
 Every-effect recordings (``benchmarks.robustness`` conditions with hand.json, both hands): the
-default tracker on the detections as they are, then with the blobs that are the markers (the
-nearest blob within MATCH_PX of a marker's true image position) given
+default tracker on the detections as they are, then with the blobs that are the markers (each
+marker's nearest blob within MATCH_PX or the marker's image radius of its true image position; a
+blob two overlapping markers share stands for their mean, as the tracker takes it) given
 - their marker's true depth ("depth exact": the layout's marker at the true pose, so the MCP
   markers' skin slide is left out of it), or the true depth plus white noise of the filter's own
   depth model ("depth drawn from the model": Nguyen et al.'s sigma, ``MeasurementNoise``);
@@ -14,7 +15,7 @@ nearest blob within MATCH_PX of a marker's true image position) given
 The default tracker without the markers' depth is the last row. What a row gains over the first
 is what that source costs.
 
-Sharp pixels, structured-light depth (``fusion``): on structured-light depth alone the default
+Sharp pixels, structured-light depth: on structured-light depth alone the default
 tracker's orientation error is about twice the clean recording's, where OpenCV's per-frame PnP,
 which reads no depth, stays at the clean figure. The clean and structured-light recordings are
 tracked on their detections and on detections drawn from the filter's noise model at the same
@@ -50,9 +51,9 @@ OBLIQUE_COS = 0.7
 MODEL_PIXEL_SIGMA = 0.015  # px: sharp rendered blobs against the truth (tracking/pixel_noise.py)
 
 AS_DETECTED = "as detected"
+OBLIQUE_EXACT = f"pixels exact where the hand turns away (cos < {OBLIQUE_COS})"
 BUDGET_DATA = (AS_DETECTED, "depth exact", "depth drawn from the model", "pixels exact",
-               f"pixels exact where the hand turns away (cos < {OBLIQUE_COS})",
-               "pixels and depth exact")
+               OBLIQUE_EXACT, "pixels and depth exact")
 NO_DEPTH = "default, no marker depth"
 TOLD = "default, pixel noise fixed"
 _TOLD_CONFIG = TrackerConfig(
@@ -96,7 +97,7 @@ def corrected(detections: list[Detections], truth, layout, uv: np.ndarray, data:
         for b, markers in _blob_markers(det.uv, uv[k], reach).items():
             # a blob two markers share (their discs overlap) is their mean, as the tracker
             # takes it (tracking/merged.py)
-            if data.startswith("pixels exact where"):
+            if data == OBLIQUE_EXACT:
                 if facing[markers].min() < OBLIQUE_COS:
                     blob_uv[b] = uv[k, markers].mean(axis=0)
             elif data.startswith("pixels"):
@@ -186,6 +187,14 @@ def _recording(cache: Path, condition: str, seed: int, n_frames: int | None):
 def error_budget_section(result: Result, seeds: tuple[int, ...],
                          fusion_seeds: tuple[int, ...]) -> list[str]:
     """The markdown section of :func:`error_budget`'s result."""
+    def table(rows) -> list[str]:
+        return ["| condition | data | tracker | rot RMSE (deg) | worst RoM error (deg) |",
+                "|---|---|---|---|---|",
+                *(f"| {c} | {d} | {t} | {m['rot']:.3f} | {m['rom']:.2f} |"
+                  for (c, d, t), m in rows)]
+
+    budget = [(key, m) for key, m in result.items() if key[0] in BUDGET_CONDITIONS]
+    fusion = [(key, m) for key, m in result.items() if key[0] not in BUDGET_CONDITIONS]
     lines = [
         "## Where the error comes from",
         "",
@@ -197,11 +206,8 @@ def error_budget_section(result: Result, seeds: tuple[int, ...],
         "'depth exact' leaves the MCP markers' skin slide out of their depth; 'depth drawn from "
         "the model' is the true depth plus white noise of the filter's own depth sigma.",
         "",
-        "| condition | data | tracker | rot RMSE (deg) | worst RoM error (deg) |",
-        "|---|---|---|---|---|",
+        *table(budget),
     ]
-    lines += [f"| {c} | {d} | {t} | {m['rot']:.3f} | {m['rom']:.2f} |"
-              for (c, d, t), m in result.items() if c in BUDGET_CONDITIONS]
     lines += [
         "",
         f"Sharp pixels (seeds {fusion_seeds[0]}-{fusion_seeds[-1]}): the clean and "
@@ -210,29 +216,33 @@ def error_budget_section(result: Result, seeds: tuple[int, ...],
         f"depths + the model's sigma). '{TOLD}': pixel sigma {MODEL_PIXEL_SIGMA} px (not "
         "learned), no skin slide or misregistration modelled (none is rendered).",
         "",
-        "| condition | data | tracker | rot RMSE (deg) | worst RoM error (deg) |",
-        "|---|---|---|---|---|",
+        *table(fusion),
     ]
-    lines += [f"| {c} | {d} | {t} | {m['rot']:.3f} | {m['rom']:.2f} |"
-              for (c, d, t), m in result.items() if c not in BUDGET_CONDITIONS]
-    lines += ["", *_findings(result), ""]
+    lines += ["", *_budget_findings(result), *_fusion_findings(result), ""]
     return lines
 
 
-def _findings(result: Result) -> list[str]:
-    """One line per budget condition (what the pixels and the depth cost), and what the
-    markers' depth is worth to the default tracker and to one with its pixel noise fixed."""
+def _budget_findings(result: Result) -> list[str]:
+    """One line per budget condition: what the pixels and the depth cost its worst
+    range-of-motion error."""
     out = []
     for c in BUDGET_CONDITIONS:
         base = result.get((c, AS_DETECTED, "default"))
         if base is None:
             continue
         pix = result[(c, "pixels exact", "default")]
-        obl = result[(c, BUDGET_DATA[4], "default")]
+        obl = result[(c, OBLIQUE_EXACT, "default")]
         dep = result[(c, "depth exact", "default")]
         out.append(
             f"- {c}: worst RoM {base['rom']:.2f} deg; exact pixels {pix['rom']:.2f} (exact "
             f"only where the hand turns away {obl['rom']:.2f}), exact depth {dep['rom']:.2f}.")
+    return out
+
+
+def _fusion_findings(result: Result) -> list[str]:
+    """What the markers' depth is worth to the default tracker and to one with its pixel noise
+    fixed, on structured light alone and on blobs drawn from the model."""
+    out = []
     for c, data in ((FUSION_CONDITIONS[-1], AS_DETECTED), ("(both)", "drawn from the model")):
         rows = [result.get((c, data, t)) for t in
                 ("default", NO_DEPTH, TOLD, f"{TOLD}, no marker depth")]
@@ -248,5 +258,4 @@ def _findings(result: Result) -> list[str]:
 def summary_lines(result: Result) -> list[str]:
     """The budget's lines for the document's summary: what exact pixels and exact depth do to
     each every-effect condition's worst range-of-motion error."""
-    return [line.replace("- ", "- Error budget, ", 1) for line in _findings(result)
-            if line.startswith(tuple(f"- {c}:" for c in BUDGET_CONDITIONS))]
+    return [line.replace("- ", "- Error budget, ", 1) for line in _budget_findings(result)]

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from benchmarks.error_budget import BUDGET_DATA, corrected, model_drawn
+from benchmarks.error_budget import OBLIQUE_EXACT, corrected, model_drawn
 from wristtrack.depth_noise import depth_sigma_nguyen
 from wristtrack.detect.detections import Detections
 
@@ -54,8 +54,8 @@ def test_exact_pixels_where_the_hand_turns_away_leaves_the_facing_frames_alone()
     truth = _truth([FACING, TILTED])
     uv, z = _true_uv(truth)
     dets = [Detections(float(k), uv[k] + 0.5, z[k]) for k in range(2)]
-    oblique = next(d for d in BUDGET_DATA if d.startswith("pixels exact where"))
-    facing, turned = corrected(dets, truth, LAYOUT, uv, oblique, np.random.default_rng(0), F)
+    facing, turned = corrected(dets, truth, LAYOUT, uv, OBLIQUE_EXACT, np.random.default_rng(0),
+                               F)
     np.testing.assert_allclose(facing.uv, uv[0] + 0.5)
     np.testing.assert_allclose(turned.uv, uv[1])
 
