@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from wristtrack.camera import Camera
+from wristtrack.detect import blobs
 from wristtrack.detect.blobs import centre_weights, shapes, trimmed_depth
 from wristtrack.detect.colour import (
     bhattacharyya,
@@ -230,31 +231,65 @@ def test_clipped_marker_is_flagged():
     assert d.suspect[j[1]] and d.suspect.sum() == 1
 
 
-def test_a_specular_highlight_on_the_rim_does_not_pull_the_centre():
-    """The lamp mirrored on a glossy marker (white added, saturating) at its rim, as
-    sim/renderer.py draws it: read along white it is a bite out of the marker."""
+def _highlight_errors(where: float, config: DetectorConfig, jpeg: int | None = None) -> np.ndarray:
+    """Each marker's centre error (px) with the lamp mirrored on it (white added, saturating),
+    as sim/renderer.py draws it: a 1.2 px spot, peak 230 grey levels, ``where`` of the way from
+    the centre to the rim; the frame JPEG-compressed at quality ``jpeg`` if given."""
     s = synth_scene(3, centre=(300.0, 250.0), tilt_deg=15.0, noise=2.0)
     bgr = s.bgr.astype(np.float32)
     blue = (bgr[..., 0] - bgr[..., 2]) > 60  # marker pixels (skin is redder than blue)
-    errors = {}
-    for excess in (np.inf, DetectorConfig().highlight_excess):
-        det = MarkerDetector(s.camera, DetectorConfig(highlight_excess=excess))
-        err = []
-        for k, (u, v) in enumerate(s.uv):
-            # a 1.2 px spot, peak 230 grey levels, two thirds of the way to the rim
-            direction = np.array([np.cos(k), np.sin(k)])
-            cu, cv_ = np.array([u, v]) + 0.65 * 6.0 * direction
-            yy, xx = np.mgrid[0 : bgr.shape[0], 0 : bgr.shape[1]]
-            spot = 230.0 * np.exp(-0.5 * ((xx - cu) ** 2 + (yy - cv_) ** 2) / 1.2**2)
-            lit = bgr + (spot * blue)[..., None]
-            d = det.detect(np.clip(lit, 0, 255).astype(np.uint8), s.depth, 0.0)
-            _, dist = match(s.uv[k : k + 1], d.uv)
-            err.append(dist[0])
-        errors[excess] = np.array(err)
-    plain, discounted = errors[np.inf], errors[DetectorConfig().highlight_excess]
-    assert plain.mean() > 0.2, errors  # the bite is real without the discount
-    # halved; what is left is the channel the highlight saturated
-    assert discounted.mean() < 0.5 * plain.mean() and discounted.max() < 0.2, errors
+    yy, xx = np.mgrid[0 : bgr.shape[0], 0 : bgr.shape[1]]
+    det = MarkerDetector(s.camera, config)
+    err = []
+    for k, (u, v) in enumerate(s.uv):
+        direction = np.array([np.cos(k), np.sin(k)])
+        cu, cv_ = np.array([u, v]) + where * 6.0 * direction
+        spot = 230.0 * np.exp(-0.5 * ((xx - cu) ** 2 + (yy - cv_) ** 2) / 1.2**2)
+        lit = np.clip(bgr + (spot * blue)[..., None], 0, 255).astype(np.uint8)
+        if jpeg is not None:
+            _, buf = cv2.imencode(".jpg", lit, [cv2.IMWRITE_JPEG_QUALITY, jpeg])
+            lit = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        d = det.detect(lit, s.depth, 0.0)
+        _, dist = match(s.uv[k : k + 1], d.uv)
+        err.append(dist[0])
+    return np.array(err)
+
+
+@pytest.mark.parametrize("where", [0.65, 0.3])
+def test_a_specular_highlight_does_not_pull_the_centre(where, monkeypatch):
+    """Read along white, the highlight is a bite out of the marker; its clipped centre, where
+    no chroma is left, is taken at the marker's level (blobs.discount_highlights)."""
+    plain = _highlight_errors(where, DetectorConfig(highlight_excess=np.inf))
+    discounted = _highlight_errors(where, DetectorConfig())
+    assert plain.mean() > 0.12, plain  # the bite is real without the discount
+    assert discounted.mean() < 0.25 * plain.mean() and discounted.max() < 0.08, (plain, discounted)
+    # without the clipped centre filled, the channel the highlight saturated still bites
+    monkeypatch.setattr(blobs, "NEAR_CLIP", 256)
+    unfilled = _highlight_errors(where, DetectorConfig())
+    assert unfilled.mean() > 2 * discounted.mean(), (unfilled, discounted)
+
+
+def test_the_highlight_skirt_leaves_compressed_blobs_without_highlights_alone():
+    """JPEG's ringing brightens pixels a little off the marker-skin line; read along white their
+    coarse chroma is noisier, so the skirt's low threshold applies only next to a highlight's
+    core: without a highlight the centres are those without any discount, where the skirt's
+    threshold taken everywhere would move them."""
+    s = synth_scene(4, centre=(300.0, 250.0), tilt_deg=30.0, noise=2.0)
+    _, buf = cv2.imencode(".jpg", s.bgr, [cv2.IMWRITE_JPEG_QUALITY, 80])
+    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    centres = []
+    for excess in (DetectorConfig().highlight_excess, np.inf, blobs.HIGHLIGHT_SKIRT_EXCESS):
+        d = MarkerDetector(s.camera, DetectorConfig(highlight_excess=excess)).detect(
+            bgr, s.depth, 0.0)
+        j, dist = match(s.uv, d.uv)
+        assert (dist < 1.0).all(), dist
+        centres.append(d.uv[j])
+    np.testing.assert_allclose(centres[0], centres[1], atol=1e-9)
+    assert np.abs(centres[2] - centres[1]).max() > 0.01
+    # and a highlight under the same compression is still discounted
+    jpeg_lit = _highlight_errors(0.3, DetectorConfig(), jpeg=80)
+    jpeg_plain = _highlight_errors(0.3, DetectorConfig(highlight_excess=np.inf), jpeg=80)
+    assert jpeg_lit.mean() < 0.5 * jpeg_plain.mean(), (jpeg_lit, jpeg_plain)
 
 
 def test_a_white_table_beside_a_marker_on_the_hands_edge_is_no_highlight():
