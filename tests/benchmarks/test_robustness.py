@@ -9,6 +9,8 @@ from benchmarks.accuracy import DEFAULT
 from benchmarks.robustness import (
     CONDITIONS,
     SMOOTHED,
+    blob_errors,
+    blob_table,
     recall,
     robustness,
     robustness_sections,
@@ -33,6 +35,33 @@ def test_recall_counts_rightly_labelled_visible_markers_only():
     assert recall(results, [blobs, blobs], uv, vis) == pytest.approx(4 / 11)
 
 
+def test_blob_errors_against_hand_built_truth():
+    uv = np.zeros((1, 6, 2))
+    uv[0, :, 0] = np.arange(6) * 20.0  # marker k at (20 k, 0)
+    vis = np.ones((1, 6))
+    vis[0, 5] = 0.2  # MCP5 mostly hidden: not counted
+    # WRIST 0.3 px off; CMC1 0.4 px off and doubted; MCP2 and MCP3 share one blob between them
+    # (10 px from each: beyond 3 px, so neither has a blob); MCP4 1.2 px off; a far clutter blob
+    blobs = SimpleNamespace(
+        uv=np.array([[0.3, 0.0], [20.0, 0.4], [50.0, 0.0], [80.0, 1.2], [300.0, 0.0]]),
+        count=5, suspect=np.array([False, True, False, False, False]))
+    m = blob_errors([blobs], uv, vis)
+    e = np.array([0.3, 0.4, 1.2])
+    assert m["blob_rms"] == pytest.approx(np.sqrt(np.mean(e**2)))
+    assert m["blob_rms_undoubted"] == pytest.approx(np.sqrt(np.mean(e[[0, 2]] ** 2)))
+    assert m["blob_median"] == pytest.approx(0.4)
+    assert m["blob_doubted"] == pytest.approx(1 / 3)
+    assert m["blob_found"] == pytest.approx(3 / 5)
+    # two overlapping markers 2 px apart share a blob between them: it counts for both
+    uv[0, 1] = (2.0, 0.0)
+    shared = SimpleNamespace(uv=np.array([[1.0, 0.0]]), count=1, suspect=None)
+    m = blob_errors([shared], uv, vis)
+    assert m["blob_rms"] == pytest.approx(1.0) and m["blob_found"] == pytest.approx(2 / 5)
+    assert m["blob_doubted"] == 0.0
+    line = blob_table({"clean": {"default": m}})[-2]
+    assert line.startswith("| clean | 1.000 | 1.000 | 1.000 | 0.0% | 40.0% |"), line
+
+
 def test_every_effect_has_a_condition_and_the_combined_ones_exist():
     alone = {tuple(c.get("effects", ())) for c in CONDITIONS.values()}
     for e in EFFECTS:
@@ -50,6 +79,9 @@ def test_one_condition_end_to_end(tmp_path):
     lines = robustness_sections(tmp_path, n_frames=15, conditions=("clean",),
                                 trackers={"default": DEFAULT})
     assert any(line.startswith("| clean | default |") for line in lines)
+    # the detector's own table: sharp blobs, every marker found
+    assert m["blob_found"] == 1.0 and m["blob_rms"] < 0.1
+    assert any(line.startswith("| clean | 0.0") for line in lines)
 
 
 def test_summary_names_only_the_targets_a_combined_condition_misses():
