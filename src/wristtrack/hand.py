@@ -24,6 +24,12 @@ MARKER_NAMES = ("WRIST", "CMC1", "MCP2", "MCP3", "MCP4", "MCP5")
 MCP3_INDEX = MARKER_NAMES.index("MCP3")
 MARKER_DIAMETER_M = 0.012  # the paper's markers: discs of blue paper, 1.2 cm across
 
+
+def marker_image_diameter(fx: float, z):
+    """A marker's diameter in the image (px) at depth ``z`` (m, scalar or array) for a camera
+    of focal length ``fx`` (px)."""
+    return fx * MARKER_DIAMETER_M / z
+
 # Validation limits (metres). Why: closer markers merge into one blob; a layout farther than
 # 25 cm is not a hand (usually millimetres written as metres); a (nearly) collinear layout leaves
 # the rotation about its line unobservable.

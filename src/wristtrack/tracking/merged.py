@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wristtrack.hand import MARKER_DIAMETER_M
+from wristtrack.hand import marker_image_diameter
 
 # Two markers whose predicted centres are closer than this many marker diameters show as one
 # blob: their discs overlap.
@@ -40,13 +40,13 @@ MERGE_SPREAD_SHARE = 0.03
 def merge_reach(fx: float) -> float:
     """MERGE_DIAMETERS marker diameters (px) times depth (m): two markers whose predicted
     centres are closer than this over their mean depth may merge."""
-    return MERGE_DIAMETERS * fx * MARKER_DIAMETER_M
+    return MERGE_DIAMETERS * marker_image_diameter(fx, 1.0)
 
 
 def marker_diameters(fx: float, z: np.ndarray) -> np.ndarray:
     """(J, J) a marker's image diameter (px) at the mean depth of each pair of markers at
     depths ``z`` (J,)."""
-    return fx * MARKER_DIAMETER_M / (0.5 * (z[:, None] + z[None, :]))
+    return marker_image_diameter(fx, 0.5 * (z[:, None] + z[None, :]))
 
 
 def merged_groups(uv_hat: np.ndarray, diameter: np.ndarray, expected: np.ndarray,

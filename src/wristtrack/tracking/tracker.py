@@ -35,7 +35,7 @@ from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.filter import ukf
 from wristtrack.geometry import relative_pose, so3_log
-from wristtrack.hand import MARKER_DIAMETER_M, HandLayout, fit_pose
+from wristtrack.hand import HandLayout, fit_pose, marker_image_diameter
 from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.generic_step import fit_covariance, generic_step
@@ -204,7 +204,7 @@ class Tracker:
         if blobs.size == 0:
             return False
         pts = self._observation(False).marker_points(x[None])[0, labels[blobs]]
-        radius = self.camera.fx * MARKER_DIAMETER_M / 2 / pts[:, 2]
+        radius = marker_image_diameter(self.camera.fx, pts[:, 2]) / 2
         offset = np.linalg.norm(det.uv[blobs] - self.camera.project(pts), axis=1)
         return bool(np.median(offset / radius) > 1.0)
 
