@@ -38,7 +38,7 @@ from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, Row, online, recorded_de
 from benchmarks.robustness import _truth_markers, render_condition
 from wristtrack.depth_noise import depth_sigma_nguyen
 from wristtrack.detect.detections import Detections
-from wristtrack.hand import MARKER_DIAMETER_M
+from wristtrack.hand import marker_image_diameter
 from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
@@ -93,7 +93,7 @@ def corrected(detections: list[Detections], truth, layout, uv: np.ndarray, data:
         points, facing = _markers_at(layout, truth, k)
         blob_uv = det.uv.copy()
         depth = None if det.depth is None else det.depth.copy()
-        reach = np.maximum(MATCH_PX, fx * MARKER_DIAMETER_M / 2 / points[:, 2])
+        reach = np.maximum(MATCH_PX, marker_image_diameter(fx, points[:, 2]) / 2)
         for b, markers in _blob_markers(det.uv, uv[k], reach).items():
             # a blob two markers share (their discs overlap) is their mean, as the tracker
             # takes it (tracking/merged.py)

@@ -24,12 +24,6 @@ MARKER_NAMES = ("WRIST", "CMC1", "MCP2", "MCP3", "MCP4", "MCP5")
 MCP3_INDEX = MARKER_NAMES.index("MCP3")
 MARKER_DIAMETER_M = 0.012  # the paper's markers: discs of blue paper, 1.2 cm across
 
-
-def marker_image_diameter(fx: float, z):
-    """A marker's diameter in the image (px) at depth ``z`` (m, scalar or array) for a camera
-    of focal length ``fx`` (px)."""
-    return fx * MARKER_DIAMETER_M / z
-
 # Validation limits (metres). Why: closer markers merge into one blob; a layout farther than
 # 25 cm is not a hand (usually millimetres written as metres); a (nearly) collinear layout leaves
 # the rotation about its line unobservable.
@@ -38,6 +32,13 @@ MAX_MARKER_DISTANCE = 0.25
 MCP3_AXIS_TOLERANCE = 0.001
 WRIST_ORIGIN_TOLERANCE = 1e-6
 MIN_OFF_LINE_SPREAD = 0.010
+
+
+def marker_image_diameter(fx: float, z):
+    """A marker's diameter in the image (px) at depth ``z`` (m, scalar or array) for a camera
+    of focal length ``fx`` (px)."""
+    return fx * MARKER_DIAMETER_M / z
+
 
 # An adult right hand (lengths in metres, angles in degrees), CMC1..MCP5.
 _DEFAULT_LENGTHS = (0.045, 0.085, 0.088, 0.083, 0.076)
