@@ -61,6 +61,7 @@ def _track(args: argparse.Namespace) -> int:
                 recording, args.out, tracker_config(args), progress=not args.no_progress,
                 smooth=args.smooth, overlay=overlay, resume=args.resume,
                 checkpoint_every=args.checkpoint_every, labels=labels, detector=args.detector,
+                survey=not args.no_survey,
             )
     except RunComplete as done:
         print(f"wristtrack track: {done}")
@@ -190,7 +191,7 @@ def _batch(args: argparse.Namespace) -> int:
             args.study_dir, args.out, tracker_config(args), workers=args.workers, dask=args.dask,
             force=args.force, progress=not args.no_progress,
             checkpoint_every=args.checkpoint_every, smooth=args.smooth,
-            report=not args.no_report,
+            report=not args.no_report, survey=not args.no_survey,
         )
     except KeyboardInterrupt:
         print(f"wristtrack batch: interrupted; {args.out}/{STUDY_CSV} lists what finished; run "
@@ -244,6 +245,11 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         help="offline unscented RTS smoothing of the whole run (filtered poses kept in "
         "poses_filtered.csv)",
     )
+    track.add_argument(
+        "--no-survey", action="store_true",
+        help="without hand.json, track once with the layout of the still start instead of "
+        "measuring it over the whole recording first (two passes; see hand_surveyed.json)",
+    )
     track.add_argument("--color-topic", help="ROS bag colour topic (auto-detected otherwise)")
     track.add_argument("--depth-topic", help="ROS bag registered depth topic")
     track.add_argument("--info-topic", help="ROS bag camera_info topic")
@@ -295,6 +301,8 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     batch.add_argument("--checkpoint-every", type=positive_int, default=300, metavar="N",
                        help="checkpoint each run every N frames, to resume it if interrupted")
     batch.add_argument("--smooth", action="store_true", help="smooth each run (see track)")
+    batch.add_argument("--no-survey", action="store_true",
+                       help="track each recording without hand.json once (see track)")
     batch.add_argument("--no-report", action="store_true",
                        help="no report.html per recording (study.csv/study.html still written)")
     batch.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -126,9 +126,11 @@ def limit_threads() -> None:
 def track_one(
     job: Job, out: str, config: Any = None, force: bool = False,
     checkpoint_every: int = CHECKPOINT_FRAMES, smooth: bool = False, report: bool = True,
+    survey: bool = True,
 ) -> dict[str, Any]:
     """Track one recording into ``out`` (resuming an interrupted run unless ``force``), smoothed
-    if asked, with its report.html unless ``report`` is False; its study row. Never raises for a
+    if asked, its layout surveyed unless ``survey`` is False (pipeline.track), with its
+    report.html unless ``report`` is False; its study row. Never raises for a
     problem with the recording: the row says ``failed``."""
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
@@ -147,7 +149,8 @@ def track_one(
         hand = HandLayout.load(job.hand) if job.hand else None
         resume = not force and (Path(out) / CHECKPOINT_FILE).is_file()
         with open_recording(job.source, camera=camera, hand=hand) as recording:
-            kw = {"progress": False, "checkpoint_every": checkpoint_every, "smooth": smooth}
+            kw = {"progress": False, "checkpoint_every": checkpoint_every, "smooth": smooth,
+                  "survey": survey}
             try:
                 summary = track_recording(recording, out, config, resume=resume, **kw)
             except CheckpointMismatch:  # the recording or the settings changed: start over
@@ -289,6 +292,7 @@ def run_batch(
     echo: Callable[[str], None] | None = print,
     smooth: bool = False,
     report: bool = True,
+    survey: bool = True,
 ) -> list[dict[str, Any]]:
     """Track every recording under ``study`` into ``out``; the study rows, in name order.
 
@@ -335,7 +339,7 @@ def run_batch(
     bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="recording",
                desc="batch", disable=not progress)
     say = bar.write if progress else echo
-    args = (config, force, checkpoint_every, smooth, report)
+    args = (config, force, checkpoint_every, smooth, report, survey)
     try:
         if todo:
             runner = (_run_dask(todo, out, dask, args) if dask

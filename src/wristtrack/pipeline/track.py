@@ -29,6 +29,14 @@ from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.smoothing import smooth_run
+from wristtrack.pipeline.surveyed import (
+    SURVEYED_HAND,
+    hand_of,
+    layout_origin,
+    load_surveyed,
+    second_pass_begun,
+)
+from wristtrack.tracking.layout_survey import RunSurvey
 from wristtrack.tracking.tracker import FrameResult, Status, Tracker, TrackerConfig
 
 if TYPE_CHECKING:
@@ -49,6 +57,7 @@ def track_recording(
     resume: bool = False,
     checkpoint_every: int = ckpt.CHECKPOINT_FRAMES,
     detector: str = "default",
+    survey: bool = True,
 ) -> dict[str, Any]:
     """Track every frame of ``recording``; write ``out``/poses.csv and ``out``/summary.json.
 
@@ -61,35 +70,88 @@ def track_recording(
     estimate. ``detector`` names the marker detector's preset: "default" (ours) or "paper"
     (the paper's as published, :mod:`wristtrack.detect.paper`). Returns the summary.
 
+    Without hand.json (``recording.hand`` None) and with ``survey``, the run takes two passes:
+    the first measures the subject's layout over the whole recording
+    (:mod:`wristtrack.tracking.layout_survey`) and writes it to ``out``/hand_surveyed.json
+    (hand.json's format, for the same subject's other recordings); the second tracks with it.
+    A live camera cannot be read twice and is tracked once.
+
     Interrupted runs: Ctrl-C or SIGTERM stops at the end of the frame being processed, saves a
     checkpoint (see :mod:`wristtrack.pipeline.checkpoint`; also saved every
     ``checkpoint_every`` frames or 30 s, so a SIGKILL loses little), writes summary.json with
     ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
-    run in ``out`` from its checkpoint, with the same result as an uninterrupted run.
+    run in ``out`` from its checkpoint, in either pass, with the same result as an
+    uninterrupted run.
     """
     detector_settings = detector_config(detector)  # an unknown name fails before any output
     out = _output_folder(out)
     config = config or TrackerConfig()
-    # the detector is a setting like the others: recorded, and part of the resume fingerprint
-    settings = {**settings_dict(config), "smoothed": bool(smooth), "detector": detector}
-    manual_labels = None if labels is None else (
-        labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
-    )
-    fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
-    checkpoints = ckpt.Checkpointer(out, fingerprint, checkpoint_every)
-    run, start = _open_run(recording, out, config, detector_settings, fingerprint, resume)
-    bar = _progress(recording, progress)
-    bar.update(start)
-    states = _state_writer(out, run.tracker, resume) if smooth else _NoStates()
-    files = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
-    with PosesWriter(out / "poses.csv", append=resume) as writer, states:
-        rows = _Rows(writer, states, overlay, bar)
-        try:
-            interrupted = _frame_loop(recording.frames(start), run, labels, rows, checkpoints,
-                                      files, recording.has_depth)
-        finally:
-            bar.close()
-    return _finish(recording, out, run, config, settings, smooth, interrupted, checkpoints)
+    passes = _Passes(config, labels, progress, smooth, checkpoint_every, detector,
+                     detector_settings)
+    surveyed = out / SURVEYED_HAND
+    if recording.hand is None and resume and surveyed.exists():  # the second pass's turn
+        with hand_of(recording, load_surveyed(surveyed)):
+            return passes.run(recording, out, overlay, second_pass_begun(out), surveyed=True)
+    surveyed.unlink(missing_ok=True)  # a previous run's
+    if not (survey and recording.hand is None and ckpt.input_identity(recording) is not None):
+        return passes.run(recording, out, overlay, resume)
+    run_survey = RunSurvey()
+    # the overlay shows the final poses: the second pass's (it then always runs)
+    data = passes.run(recording, out, None, resume, survey=run_survey)
+    found = run_survey.survey()
+    layout = found.surveyed_layout() if found is not None else None
+    if layout is None:
+        if overlay is None:
+            return data  # nothing surveyed: the first pass is the run
+        return passes.run(recording, out, overlay, False)
+    write_json_atomic(surveyed, layout.to_dict())
+    with hand_of(recording, layout):
+        return passes.run(recording, out, overlay, False, surveyed=True)
+
+
+@dataclass
+class _Passes:
+    """The settings every pass of one ``track_recording`` call shares."""
+
+    config: TrackerConfig
+    labels: Any
+    progress: bool
+    smooth: bool
+    checkpoint_every: int
+    detector: str
+    detector_settings: DetectorConfig
+
+    def run(self, recording: Recording, out: Path, overlay: Any, resume: bool,
+            survey: RunSurvey | None = None, surveyed: bool = False) -> dict[str, Any]:
+        """One pass over ``recording`` into ``out``: its summary. ``survey`` follows the
+        tracker (a first pass); ``surveyed``: the recording carries the surveyed layout."""
+        # the detector is a setting like the others: recorded, and part of the resume
+        # fingerprint; so is the pass (its hand is the surveyed layout's)
+        settings = {**settings_dict(self.config), "smoothed": bool(self.smooth),
+                    "detector": self.detector,
+                    "hand_layout_from": layout_origin(recording, survey, surveyed)}
+        labels = self.labels
+        manual_labels = None if labels is None else (
+            labels.to_dict() if hasattr(labels, "to_dict") else np.asarray(labels).tolist()
+        )
+        fingerprint = ckpt.fingerprint(recording, {**settings, "labels": manual_labels})
+        checkpoints = ckpt.Checkpointer(out, fingerprint, self.checkpoint_every)
+        run, start = _open_run(recording, out, self.config, self.detector_settings,
+                               fingerprint, resume, survey)
+        bar = _progress(recording, self.progress, "surveying the hand" if survey else "tracking")
+        bar.update(start)
+        smooth = self.smooth  # a first pass too: it is the run if the survey finds nothing
+        states = _state_writer(out, run.tracker, resume) if smooth else _NoStates()
+        files = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
+        with PosesWriter(out / "poses.csv", append=resume) as writer, states:
+            rows = _Rows(writer, states, overlay, bar)
+            try:
+                interrupted = _frame_loop(recording.frames(start), run, labels, rows,
+                                          checkpoints, files, recording.has_depth)
+            finally:
+                bar.close()
+        return _finish(recording, out, run, self.config, settings, smooth, interrupted,
+                       checkpoints)
 
 
 # ------------------------------------------------------------------------------ opening
@@ -107,11 +169,12 @@ class _RunState:
     # frames of a recording with depth that came without (a lost depth frame, or one not of
     # their moment: io.base.pairing_tolerance), tracked on colour alone; for summary.json
     without_depth: list[int] = field(default_factory=list)
+    survey: RunSurvey | None = None  # a first pass's survey of the layout
 
     def saved(self) -> dict[str, Any]:
         return {"detector": self.detector, "tracker": self.tracker, "summary": self.summary,
                 "learned": self.learned, "bad_frames": self.bad_frames,
-                "without_depth": self.without_depth}
+                "without_depth": self.without_depth, "survey": self.survey}
 
 
 def _output_folder(out: str | Path) -> Path:
@@ -133,18 +196,24 @@ def _open_run(
     detector: DetectorConfig,
     fingerprint: dict[str, Any] | None,
     resume: bool,
+    survey: RunSurvey | None = None,
 ) -> tuple[_RunState, int]:
     """The state to start from and the index of the first frame: a fresh run (a previous
     run's checkpoint and summary removed), or the checkpoint's, with the output files cut back
-    to it (rows written after the checkpoint are redone)."""
+    to it (rows written after the checkpoint are redone). ``survey`` follows a first pass's
+    tracker (a resumed one continues the checkpoint's, into ``survey``)."""
     if not resume:
         ckpt.clear_stale(out)
         tracker = Tracker(recording.camera, recording.hand, config)
         return (_RunState(MarkerDetector(recording.camera, detector), tracker,
-                          SummaryAccumulator()), 0)
+                          SummaryAccumulator(), survey=survey), 0)
     saved = ckpt.load_checkpoint(out, fingerprint)
     ckpt.truncate_outputs(out, saved)
-    return _RunState(**saved.state), saved.next_index
+    run = _RunState(**saved.state)
+    if survey is not None and run.survey is not None:
+        survey.__dict__.update(run.survey.__dict__)  # the caller's object holds the survey
+    run.survey = survey
+    return run, saved.next_index
 
 
 # ---------------------------------------------------------------------------- frame loop
@@ -223,6 +292,8 @@ def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None
     if result.frame != frame.index:  # after skipped frames: the recording's numbers
         result = replace(result, frame=frame.index)
     run.learned = follow_colours(run.detector, frame.bgr, det, result, frame.index, run.learned)
+    if run.survey is not None:
+        run.survey.add(run.tracker, det, result)
     rows.tracked(frame.index, frame.timestamp, result)
     if rows.overlay is not None:
         rows.overlay.add(frame.bgr, det, result)
@@ -415,7 +486,7 @@ class _NoBar:
         pass
 
 
-def _progress(recording: Recording, enabled: bool):
+def _progress(recording: Recording, enabled: bool, desc: str = "tracking"):
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
@@ -424,4 +495,4 @@ def _progress(recording: Recording, enabled: bool):
         total = len(recording) or None
     except TypeError:
         total = None
-    return tqdm(total=total, unit="frame", desc="tracking", leave=False)
+    return tqdm(total=total, unit="frame", desc=desc, leave=False)
