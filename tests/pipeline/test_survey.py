@@ -15,7 +15,7 @@ import pytest
 from wristtrack.cli import main
 from wristtrack.hand import HandLayout
 from wristtrack.io.open import open_recording
-from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
+from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE, CheckpointMismatch
 from wristtrack.pipeline.surveyed import SURVEYED_HAND
 from wristtrack.pipeline.track import track_recording
 
@@ -119,4 +119,18 @@ def test_a_run_stopped_between_the_passes_resumes_with_the_second(rec, runs, tmp
     with open_recording(rec) as recording:
         summary = track_recording(recording, out, progress=False, resume=True)
     assert summary["settings"]["hand_layout_from"].startswith("surveyed")
+    assert (out / "poses.csv").read_bytes() == (runs["surveyed"] / "poses.csv").read_bytes()
+
+
+def test_resuming_the_second_pass_with_no_survey_is_refused_and_keeps_it(rec, runs, tmp_path):
+    out = tmp_path / "run"
+    with open_recording(rec) as recording:
+        _interrupt_on_read(recording, 40, 2)
+        with pytest.raises(KeyboardInterrupt):
+            track_recording(recording, out, progress=False, checkpoint_every=15)
+    with open_recording(rec) as recording, pytest.raises(CheckpointMismatch,
+                                                         match="hand layout"):
+        track_recording(recording, out, progress=False, resume=True, survey=False)
+    with open_recording(rec) as recording:
+        track_recording(recording, out, progress=False, resume=True)
     assert (out / "poses.csv").read_bytes() == (runs["surveyed"] / "poses.csv").read_bytes()

@@ -26,6 +26,7 @@ def _track(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
     from wristtrack.io.open import open_recording
+    from wristtrack.pipeline.surveyed import SURVEYED_HAND
     from wristtrack.pipeline.track import track_recording
 
     camera = Camera.load(args.camera) if args.camera else None
@@ -75,6 +76,9 @@ def _track(args: argparse.Namespace) -> int:
     print(f"tracked {frames['tracked']} of {frames['total']} frames"
           + (f" ({len(no_depth)} without depth, on colour alone)" if no_depth else "")
           + f"; wrote {args.out}/poses.csv and {args.out}/summary.json")
+    if summary["settings"].get("hand_layout_from", "").startswith("surveyed"):
+        print(f"  hand layout surveyed over the recording: {args.out}/{SURVEYED_HAND} (use it "
+              "as --hand for this subject's other recordings)")
     for axis, rom in summary["range_of_motion"].items():
         if rom["range_deg"] is not None:
             print(f"  {axis:<10} {rom['min_deg']:7.1f} .. {rom['max_deg']:6.1f} deg "

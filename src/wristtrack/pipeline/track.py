@@ -89,11 +89,13 @@ def track_recording(
     passes = _Passes(config, labels, progress, smooth, checkpoint_every, detector,
                      detector_settings)
     surveyed = out / SURVEYED_HAND
-    if recording.hand is None and resume and surveyed.exists():  # the second pass's turn
+    surveying = survey and recording.hand is None
+    if surveying and resume and surveyed.exists():  # the second pass's turn
         with hand_of(recording, load_surveyed(surveyed)):
             return passes.run(recording, out, overlay, second_pass_begun(out), surveyed=True)
-    surveyed.unlink(missing_ok=True)  # a previous run's
-    if not (survey and recording.hand is None and ckpt.input_identity(recording) is not None):
+    if not resume:
+        surveyed.unlink(missing_ok=True)  # a previous run's
+    if not (surveying and ckpt.input_identity(recording) is not None):
         return passes.run(recording, out, overlay, resume)
     run_survey = RunSurvey()
     # the overlay shows the final poses: the second pass's (it then always runs)
