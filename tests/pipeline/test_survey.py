@@ -134,3 +134,17 @@ def test_resuming_the_second_pass_with_no_survey_is_refused_and_keeps_it(rec, ru
     with open_recording(rec) as recording:
         track_recording(recording, out, progress=False, resume=True)
     assert (out / "poses.csv").read_bytes() == (runs["surveyed"] / "poses.csv").read_bytes()
+
+
+def test_a_live_session_without_hand_json_writes_the_surveyed_layout(rec, runs, tmp_path):
+    """Live: tracked once with the still start's layout (the camera cannot be read twice), the
+    survey written for the subject's next session."""
+    out = tmp_path / "live"
+    assert main(["track", "--live", f"replay:{rec}", "--out", str(out), "--no-report"]) == 0
+    summary = _json(out / "summary.json")
+    live = HandLayout.load(out / SURVEYED_HAND)
+    assert summary["hand_layout_surveyed"] == live.to_dict()
+    still = HandLayout.from_dict(summary["hand_layout"])
+    truth = HandLayout.default().points
+    assert (np.abs(live.points - truth)[:, 2].max()
+            < 0.5 * np.abs(still.points - truth)[:, 2].max())

@@ -133,6 +133,9 @@ def _track_live(args: argparse.Namespace) -> int:
     print(f"tracked {summary['frames']['tracked']} of {frames['total']} frames "
           f"({frames['dropped']} dropped{no_depth}); latency p50 {lat['p50']:.1f} ms, p95 "
           f"{lat['p95']:.1f} ms; wrote {args.out}/poses.csv, summary.json and live.json")
+    if summary.get("hand_layout_surveyed"):
+        print(f"  hand layout surveyed over the session: {args.out}/hand_surveyed.json (use it "
+              "as --hand for this subject's next session)")
     if live.get("record"):
         rec = live["record"]
         print(f"recorded {rec['frames']} frames to {rec['folder']}"

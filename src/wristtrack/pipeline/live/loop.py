@@ -16,6 +16,10 @@ learning at the first fix runs in a thread (:class:`BackgroundLearning`); the of
 slow colour adaptation (every 10th confidently tracked frame, following a drift of the light)
 is not run live, so a session keeps the colours learnt at its first fix. Offline re-tracking of
 a ``--record`` copy gets both.
+
+Without hand.json the session is tracked with the still start's layout (a camera cannot be read
+twice), and the layout surveyed over the session (tracking/layout_survey.py) is written as
+hand_surveyed.json, a hand.json for the subject's next session.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from wristtrack.io.base import Frame, Recording
 from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.pipeline.interrupt import DeferredInterrupt
+from wristtrack.pipeline.surveyed import SURVEYED_HAND
 from wristtrack.pipeline.track import (
     learn_colours,
     no_initialisation_message,
@@ -44,6 +49,7 @@ from wristtrack.pipeline.track import (
     skipped_row,
 )
 from wristtrack.tracking import compiled
+from wristtrack.tracking.layout_survey import RunSurvey
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
 LIVE_JSON = "live.json"
@@ -259,12 +265,15 @@ def track_live(
     except OSError as e:
         raise InputError(f"cannot create the output folder {out} ({e.strerror}); give --out a "
                          "folder you can write to") from None
-    for stale in ("summary.json", LIVE_JSON):
+    for stale in ("summary.json", LIVE_JSON, SURVEYED_HAND):
         (out / stale).unlink(missing_ok=True)
     config = config or TrackerConfig()
     camera = source.camera
     detector = MarkerDetector(camera)
     tracker = Tracker(camera, source.hand, config)
+    # without hand.json the layout is surveyed as the session goes, for the subject's next one
+    # (a live camera cannot be read twice: this session keeps the still start's)
+    survey = RunSurvey() if source.hand is None else None
     summary = SummaryAccumulator()
     log = LiveLog()
     learner: BackgroundLearning | None = None
@@ -314,6 +323,8 @@ def track_live(
                 writer.write_result(result)
                 log.add(frame, item.arrived, started, time.perf_counter())
                 summary.add(result)
+                if survey is not None:
+                    survey.add(tracker, det, result)
                 if learner is None and result.status == Status.TRACKING:
                     learner = BackgroundLearning(camera, frame.bgr, det, result)
                 elif learner is not None:
@@ -338,6 +349,10 @@ def track_live(
         record=_record_notes(recorder),
     )
     write_json_atomic(out / LIVE_JSON, live)
+    found = survey.survey() if survey is not None else None
+    surveyed = found.surveyed_layout() if found is not None else None
+    if surveyed is not None:
+        write_json_atomic(out / SURVEYED_HAND, surveyed.to_dict())
     data = summary.to_dict(
         hand_layout=tracker.layout.to_dict() if tracker.layout is not None else None,
         camera_pose_w0=camera_pose_dict(tracker.R_c0, tracker.t_c0),
@@ -349,6 +364,7 @@ def track_live(
         warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
+        hand_layout_surveyed=surveyed.to_dict() if surveyed is not None else None,
         kinematics=analyse_file(out / "poses.csv"),
     )
     write_json_atomic(out / "summary.json", data)
