@@ -14,8 +14,8 @@ equations of one Gauss-Newton step on its hand-frame position: pixels and depth 
 filter weighs them (depth no more than over the still start: its errors are correlated in
 time), linearised at the layout in use. A marker moves only where the pixels alone place it
 to half a millimetre. Memory stays flat however long the run.
-:meth:`LayoutSurvey.surveyed_layout` solves them (the poses are taken as they are: a second round of
-pose and layout changed the rendered recordings' errors by less than 0.01 deg).
+:meth:`LayoutSurvey.surveyed_layout` solves them (the poses are taken as they are: a second
+round of pose and layout changed the rendered recordings' errors by less than 0.01 deg).
 :class:`RunSurvey` follows a tracker through a run and keeps the survey of its longest-held
 layout; ``wristtrack track`` then tracks the recording again with it (pipeline/track.py).
 
@@ -25,7 +25,7 @@ neutral start, where the hand frame and W0 are defined. The MCP markers' common 
 the hand (x, y) against the still start is that slide, not a better measurement, so it is taken
 out; the heights and the markers' places relative to one another are kept. (Kept in, the hand
 frame built on the surveyed markers was 0.3 deg off the neutral one, and the orientation error
-of the rendered every-effect recordings rose from 0.69 to 0.95 deg.)
+of the rendered every-effect recordings rose from 0.69 to 0.90 deg.)
 """
 
 from __future__ import annotations
