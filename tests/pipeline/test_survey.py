@@ -62,6 +62,9 @@ def test_the_surveyed_layout_is_written_used_and_closer_to_the_hand(runs, check_
     proc = subprocess.run([sys.executable, str(check_run), str(surveyed)],
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stdout
+    assert main(["report", str(surveyed)]) == 0  # the report says where the layout came from
+    page = (surveyed / "report.html").read_text()
+    assert "Hand layout" in page and "surveyed over the recording" in page
 
 
 def test_a_recording_with_hand_json_is_tracked_once(rec, tmp_path):
@@ -145,6 +148,9 @@ def test_a_live_session_without_hand_json_writes_the_surveyed_layout(rec, runs, 
     live = HandLayout.load(out / SURVEYED_HAND)
     assert summary["hand_layout_surveyed"] == live.to_dict()
     still = HandLayout.from_dict(summary["hand_layout"])
+    assert summary["settings"]["hand_layout_from"] == "still start"
     truth = HandLayout.default().points
     assert (np.abs(live.points - truth)[:, 2].max()
             < 0.5 * np.abs(still.points - truth)[:, 2].max())
+    assert main(["report", str(out)]) == 0
+    assert "surveyed over the session for the next one" in (out / "report.html").read_text()

@@ -165,6 +165,11 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
                                 f"{'yes' if settings.get('use_depth') else 'no'}, detector "
                                 f"{settings.get('detector', 'default')}"
                                 f"{', RTS-smoothed' if settings.get('smoothed') else ''}"))
+    origin = settings.get("hand_layout_from")
+    if origin:  # hand.json, the still start or surveyed (tracking/layout_survey.py)
+        surveyed = summary.get("hand_layout_surveyed")
+        rows.append(("Hand layout", origin + ("; surveyed over the session for the next one: "
+                                              "hand_surveyed.json" if surveyed else "")))
     noise = summary.get("measurement_noise")
     if noise:  # what the tracker learned of this camera's blobs and this hand's skin
         rows.append(("Noise learned", _learned_noise(noise)))

@@ -358,7 +358,8 @@ def track_live(
         camera_pose_w0=camera_pose_dict(tracker.R_c0, tracker.t_c0),
         camera=camera.to_dict(),
         source=str(source.source),
-        settings={**settings_dict(config), "smoothed": False, "live": True},
+        settings={**settings_dict(config), "smoothed": False, "live": True,
+                  "hand_layout_from": "hand.json" if source.hand is not None else "still start"},
         skipped_frames=skipped,
         frames_without_depth=log.without_depth,
         warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
