@@ -63,6 +63,7 @@ def _check_table(study, rows, good_status="ok"):
         for axis in AXES:  # the table's RoM is the tracked one: close to the simulated truth
             assert abs(float(row[f"{axis}_range_deg"]) - truth[axis]) < 4.0, (name, axis)
         assert float(row["peak_speed_m_s"]) > 0
+        assert row["hand_layout"] == "hand.json"  # rendered with one: tracked once
     missing, camera = by_name[BROKEN[0]], by_name[BROKEN[1]]
     assert missing["status"] == camera["status"] == "failed"
     assert "000007.png" in missing["error"] and "not found" in missing["error"]

@@ -23,6 +23,7 @@ from wristtrack.io.atomic import write_text_atomic
 COLUMNS = (
     "recording", "status", "error", "frames", "frames_tracked",
     *(f"{axis}_range_deg" for axis in AXES), "peak_speed_m_s", "duration_s",
+    "hand_layout",  # where the layout came from: hand.json, still start or surveyed
 )
 STATUSES = ("ok", "failed", "skipped", "pending")
 
@@ -35,6 +36,7 @@ def row_from_summary(name: str, status: str, summary: dict[str, Any]) -> dict[st
         "recording": name, "status": status, "error": "",
         "frames": frames.get("total"), "frames_tracked": frames.get("tracked"),
         "peak_speed_m_s": summary.get("peak_speed_m_s"), "duration_s": summary.get("duration_s"),
+        "hand_layout": (summary.get("settings") or {}).get("hand_layout_from"),
     }
     for axis in AXES:
         row[f"{axis}_range_deg"] = rom.get(axis, {}).get("range_deg")
