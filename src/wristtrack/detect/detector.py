@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from wristtrack.camera import Camera
+from wristtrack.detect.blob_size import BlobSize, expected_length
 from wristtrack.detect.blobs import (
     DEPTH_CORE,
     Shapes,
@@ -131,6 +132,7 @@ class MarkerDetector(MarkerLearning):
         self.last_region: SkinRegion | None = None
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
+        self.blob_size = BlobSize()  # the blobs' typical length on the expected one, learned
 
     @property
     def reference(self) -> np.ndarray:
@@ -202,6 +204,10 @@ class MarkerDetector(MarkerLearning):
             blobs = blobs + self._streaks(bgr, depth, near, blobs)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
+        # the blobs as long as any (a minority of merged pairs leaves the median), not those
+        # whose shape is cut (clipped, split, on the border) or smeared (a streak)
+        self.blob_size.learn([(b.major, b.expected_diameter) for b in blobs
+                              if b.reason in ("", "elongated")], self.config.psf_sigma_px)
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
         suspect = np.array([b.suspect for b in blobs], dtype=bool)
@@ -424,7 +430,7 @@ class MarkerDetector(MarkerLearning):
         with np.errstate(invalid="ignore"):
             agree = np.abs(own_d - frame_d) <= cfg.depth_size_tolerance * frame_d
         exp_d = np.where(agree, own_d, frame_d)
-        ratio = sh.major / np.sqrt(exp_d * exp_d + 16 * cfg.psf_sigma_px**2)
+        ratio = sh.major / (expected_length(exp_d, cfg.psf_sigma_px) * self.blob_size.scale)
         ok = (sh.mass >= cfg.min_area_px) & (sh.minor >= cfg.min_axis_ratio * sh.major)
         with np.errstate(invalid="ignore"):
             ok &= ~((ratio < cfg.min_size_ratio) | (ratio > cfg.max_size_ratio))
