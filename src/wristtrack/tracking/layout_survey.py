@@ -38,6 +38,7 @@ from wristtrack.errors import ConfigError
 from wristtrack.hand import HandLayout, estimate_layout
 from wristtrack.tracking.neutral import STILL_FRAMES
 from wristtrack.tracking.observation import SLIDING_MARKERS, MeasurementNoise
+from wristtrack.tracking.pose_fit import pinhole_jacobian
 from wristtrack.tracking.results import FrameResult, Status
 
 MIN_FRAMES = 30  # a marker seen in fewer frames keeps its place (1 s at 30 fps)
@@ -84,9 +85,7 @@ class LayoutSurvey:
                          cam.fy * (pc[:, 1] / z - xy[:, 1])], 1) / s
         # d(u, v)/d(point) of the pinhole projection, then through the pose to the hand frame
         J = np.zeros((len(blobs), 3, 3))
-        J[:, 0, 0], J[:, 0, 2] = cam.fx / z, -cam.fx * pc[:, 0] / z**2
-        J[:, 1, 1], J[:, 1, 2] = cam.fy / z, -cam.fy * pc[:, 1] / z**2
-        J[:, :2] /= s
+        J[:, :2] = pinhole_jacobian(cam, pc) / s
         r = np.zeros((len(blobs), 3))  # rows: u, v, depth
         r[:, :2] = r_px
         if det.depth is not None:

@@ -40,7 +40,7 @@ class PoseFit:
     iterations: int
 
 
-def _pinhole_jacobian(camera: Camera, X: np.ndarray) -> np.ndarray:
+def pinhole_jacobian(camera: Camera, X: np.ndarray) -> np.ndarray:
     """d(u, v)/dX of the undistorted pinhole at camera points X (N,3) -> (N,2,3)."""
     x, y, z = X[:, 0], X[:, 1], X[:, 2]
     J = np.zeros((X.shape[0], 2, 3))
@@ -112,7 +112,7 @@ def refine_pose(
     def normal_equations(
         t: np.ndarray, r: np.ndarray, Xv: np.ndarray, Xd: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        Jpx = (_pinhole_jacobian(camera, Xv) @ _point_jacobian(Xv, t)).reshape(-1, 6)
+        Jpx = (pinhole_jacobian(camera, Xv) @ _point_jacobian(Xv, t)).reshape(-1, 6)
         Jz = _point_jacobian(Xd, t)[:, 2, :]
         J = np.concatenate([Jpx / pixel_sigma, Jz / sz[:, None]])
         return J.T @ J, J.T @ r
