@@ -56,8 +56,7 @@ def _default_tracker(camera: Camera, layout: HandLayout | None,
         results.append(tracker.step(d))
         if survey is not None:
             survey.add(tracker, d, results[-1])
-    found = survey.survey() if survey is not None else None
-    surveyed = found.surveyed_layout() if found is not None else None
+    surveyed = survey.surveyed_layout() if survey is not None else None
     if surveyed is not None:
         tracker = Tracker(camera, surveyed, TrackerConfig())
         results = [tracker.step(d) for d in detections]

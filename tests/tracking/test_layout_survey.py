@@ -196,3 +196,5 @@ def test_a_run_keeps_the_survey_of_the_layout_it_held_longest(first):
     kept = run.survey()
     assert kept.layout is (a.layout if first > 70 else b.layout)
     assert (kept.frames == max(first, 140 - first)).all()
+    np.testing.assert_array_equal(run.surveyed_layout().points, kept.surveyed_layout().points)
+    assert RunSurvey().surveyed_layout() is None  # nothing tracked

@@ -100,8 +100,7 @@ def track_recording(
     run_survey = RunSurvey()
     # the overlay shows the final poses: the second pass's (it then always runs)
     data = passes.run(recording, out, None, resume, survey=run_survey)
-    found = run_survey.survey()
-    layout = found.surveyed_layout() if found is not None else None
+    layout = run_survey.surveyed_layout()
     if layout is None:
         if overlay is None:
             return data  # nothing surveyed: the first pass is the run

@@ -173,3 +173,9 @@ class RunSurvey:
         """The survey of the layout held longest, or None when the tracker never tracked."""
         self._keep_best()
         return self.best
+
+    def surveyed_layout(self) -> HandLayout | None:
+        """The layout held longest, as surveyed (:meth:`LayoutSurvey.surveyed_layout`), or
+        None: nothing tracked, or nothing the survey could move."""
+        best = self.survey()
+        return best.surveyed_layout() if best is not None else None

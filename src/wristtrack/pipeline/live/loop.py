@@ -349,8 +349,7 @@ def track_live(
         record=_record_notes(recorder),
     )
     write_json_atomic(out / LIVE_JSON, live)
-    found = survey.survey() if survey is not None else None
-    surveyed = found.surveyed_layout() if found is not None else None
+    surveyed = survey.surveyed_layout() if survey is not None else None
     if surveyed is not None:
         write_json_atomic(out / SURVEYED_HAND, surveyed.to_dict())
     data = summary.to_dict(
