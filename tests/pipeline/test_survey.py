@@ -15,8 +15,8 @@ import pytest
 from wristtrack.cli import main
 from wristtrack.hand import HandLayout
 from wristtrack.io.open import open_recording
+from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE, CheckpointMismatch
-from wristtrack.pipeline.surveyed import SURVEYED_HAND
 from wristtrack.pipeline.track import track_recording
 
 

@@ -26,7 +26,8 @@ def _track(args: argparse.Namespace) -> int:
     from wristtrack.camera import Camera
     from wristtrack.hand import HandLayout
     from wristtrack.io.open import open_recording
-    from wristtrack.pipeline.surveyed import SURVEYED_HAND
+    from wristtrack.io.run_folder import SURVEYED_HAND
+    from wristtrack.pipeline.surveyed import is_surveyed
     from wristtrack.pipeline.track import track_recording
 
     camera = Camera.load(args.camera) if args.camera else None
@@ -76,7 +77,7 @@ def _track(args: argparse.Namespace) -> int:
     print(f"tracked {frames['tracked']} of {frames['total']} frames"
           + (f" ({len(no_depth)} without depth, on colour alone)" if no_depth else "")
           + f"; wrote {args.out}/poses.csv and {args.out}/summary.json")
-    if summary["settings"].get("hand_layout_from", "").startswith("surveyed"):
+    if is_surveyed(summary["settings"]):
         print(f"  hand layout surveyed over the recording: {args.out}/{SURVEYED_HAND} (use it "
               "as --hand for this subject's other recordings)")
     for axis, rom in summary["range_of_motion"].items():
@@ -134,7 +135,9 @@ def _track_live(args: argparse.Namespace) -> int:
           f"({frames['dropped']} dropped{no_depth}); latency p50 {lat['p50']:.1f} ms, p95 "
           f"{lat['p95']:.1f} ms; wrote {args.out}/poses.csv, summary.json and live.json")
     if summary.get("hand_layout_surveyed"):
-        print(f"  hand layout surveyed over the session: {args.out}/hand_surveyed.json (use it "
+        from wristtrack.io.run_folder import SURVEYED_HAND
+
+        print(f"  hand layout surveyed over the session: {args.out}/{SURVEYED_HAND} (use it "
               "as --hand for this subject's next session)")
     if live.get("record"):
         rec = live["record"]

@@ -15,6 +15,10 @@ import numpy as np
 from wristtrack.errors import InputError
 from wristtrack.io.poses import read_poses
 
+# Without hand.json, the layout `track` surveyed over the recording (tracking/layout_survey.py),
+# in hand.json's format, for the subject's other recordings
+SURVEYED_HAND = "hand_surveyed.json"
+
 
 def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""

@@ -1,28 +1,36 @@
-"""The layout a first pass of ``wristtrack track`` surveyed (tracking/layout_survey.py): its
-file in the run folder, and which pass a run folder is at (pipeline/track.py)."""
+"""The layout a first pass of ``wristtrack track`` surveyed (tracking/layout_survey.py): where a
+pass's layout came from, which pass a run folder is at, and the layout's file
+(``io.run_folder.SURVEYED_HAND``) read back (pipeline/track.py)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
 from wristtrack.io.base import Recording
+from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.tracking.layout_survey import RunSurvey
 
-SURVEYED_HAND = "hand_surveyed.json"  # hand.json's format, for the subject's other recordings
+SURVEYED_FROM = "surveyed over the recording"  # settings.hand_layout_from of a surveyed pass
 
 
 def layout_origin(recording: Recording, survey: RunSurvey | None, surveyed: bool) -> str:
     """Where a pass's hand layout comes from, as summary.json's settings say it."""
     if surveyed:
-        return f"surveyed over the recording ({SURVEYED_HAND})"
+        return f"{SURVEYED_FROM} ({SURVEYED_HAND})"
     if recording.hand is not None:
         return "hand.json"
     return "still start" + (" (surveying)" if survey is not None else "")
+
+
+def is_surveyed(settings: dict[str, Any]) -> bool:
+    """Whether a run's settings (summary.json) say it tracked with the surveyed layout."""
+    return str(settings.get("hand_layout_from", "")).startswith(SURVEYED_FROM)
 
 
 def second_pass_begun(out: Path) -> bool:
@@ -31,8 +39,7 @@ def second_pass_begun(out: Path) -> bool:
     if (out / ckpt.CHECKPOINT_FILE).is_file():
         return True
     summary = ckpt.completed_summary(out)
-    origin = (summary or {}).get("settings", {}).get("hand_layout_from", "")
-    return origin.startswith("surveyed")
+    return is_surveyed((summary or {}).get("settings", {}))
 
 
 @contextmanager

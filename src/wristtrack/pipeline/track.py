@@ -25,12 +25,12 @@ from wristtrack.errors import InitialisationError, InputError
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.poses import PosesWriter, pose_row
+from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.pipeline.surveyed import (
-    SURVEYED_HAND,
     hand_of,
     layout_origin,
     load_surveyed,

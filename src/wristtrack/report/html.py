@@ -22,7 +22,7 @@ from wristtrack.analysis.kinematics import analyse, speed_series
 from wristtrack.analysis.kinematics_settings import KinematicsSettings
 from wristtrack.geometry import matrix_from_quat
 from wristtrack.io.atomic import write_bytes_atomic
-from wristtrack.io.run_folder import read_run
+from wristtrack.io.run_folder import SURVEYED_HAND, read_run
 from wristtrack.report import figures as rf
 
 FIGURES = (
@@ -169,7 +169,7 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     if origin:  # hand.json, the still start or surveyed (tracking/layout_survey.py)
         surveyed = summary.get("hand_layout_surveyed")
         rows.append(("Hand layout", origin + ("; surveyed over the session for the next one: "
-                                              "hand_surveyed.json" if surveyed else "")))
+                                              f"{SURVEYED_HAND}" if surveyed else "")))
     noise = summary.get("measurement_noise")
     if noise:  # what the tracker learned of this camera's blobs and this hand's skin
         rows.append(("Noise learned", _learned_noise(noise)))

@@ -40,8 +40,8 @@ from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
+from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.pipeline.interrupt import DeferredInterrupt
-from wristtrack.pipeline.surveyed import SURVEYED_HAND
 from wristtrack.pipeline.track import (
     learn_colours,
     no_initialisation_message,
