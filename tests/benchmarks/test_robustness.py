@@ -11,6 +11,8 @@ from benchmarks.robustness import (
     SMOOTHED,
     blob_errors,
     blob_table,
+    depth_errors,
+    depth_table,
     recall,
     robustness,
     robustness_sections,
@@ -60,6 +62,57 @@ def test_blob_errors_against_hand_built_truth():
     assert m["blob_doubted"] == 0.0
     line = blob_table({"clean": {"default": m}})[-2]
     assert line.startswith("| clean | 1.000 | 1.000 | 1.000 | 0.0% | 40.0% |"), line
+
+
+def _tilted_hand(n: int = 300):
+    """Six markers on a hand 0.65 m away turning about the camera's y axis (0-30 deg and
+    back), their image positions (pinhole, fx = fy = 525), camera-frame points and normals."""
+    from scipy.spatial.transform import Rotation
+
+    layout = np.array([[0, 0, 0], [0.02, 0.03, 0], [0.07, 0.02, 0], [0.075, 0, 0],
+                       [0.07, -0.015, 0], [0.06, -0.03, 0]], float)
+    angle = np.radians(30) * np.sin(np.linspace(0, 2 * np.pi, n)) ** 2
+    R = Rotation.from_euler("y", angle[:, None]).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    points = np.einsum("nij,kj->nki", R, layout) + [0.0, 0.0, 0.65]
+    uv = 525 * points[..., :2] / points[..., 2:] + [320, 240]
+    return uv, points, R[:, :, 2], np.arange(n) / 30
+
+
+def test_depth_errors_against_hand_built_truth():
+    """White depth noise: its rms back, inflation 1, no offset. A fixed 2 px offset along u on
+    top (the depth read off the blob on the tilted hand, G s by hand: the plane's depth slope
+    z^2 n_x / (fx n.p) per px) and a 1 mm constant error of one marker: the offset comes back,
+    the constant is taken out with the marker's mean, and the errors left are the noise."""
+    from wristtrack.tracking.observation import registration_depth_jacobian
+
+    rng = np.random.default_rng(0)
+    uv, points, normals, t = _tilted_hand()
+    vis = np.ones(uv.shape[:2])
+    noise = rng.normal(0, 0.001, uv.shape[:2])
+
+    def blobs(depth):
+        return [SimpleNamespace(uv=uv[k] + 0.2, count=6, depth=depth[k]) for k in range(len(t))]
+
+    m = depth_errors(blobs(points[..., 2] + noise), uv, vis, points, normals, t, 525.0, 525.0)
+    assert m["depth_rms"] == pytest.approx(1.0, rel=0.1)
+    assert m["depth_inflation"] == pytest.approx(1.0, abs=0.3)
+    assert m["depth_offset"] < 0.4  # 30 draws of this noise: median 0.06 px, largest 0.22
+    slope = np.stack([registration_depth_jacobian(points[k], normals[k], 1.0, 525.0, 525.0)
+                      for k in range(len(t))])
+    by_hand = (points[..., 2] ** 2 * -normals[:, None, 0]
+               / (525.0 * np.einsum("nkj,nj->nk", points, normals)))
+    np.testing.assert_allclose(slope[..., 0], by_hand)
+    shifted = points[..., 2] + noise + 2.0 * slope[..., 0]
+    shifted[:, 3] += 0.001
+    m = depth_errors(blobs(shifted), uv, vis, points, normals, t, 525.0, 525.0)
+    assert m["depth_offset"] == pytest.approx(2.0, abs=0.4)
+    assert m["depth_inflation"] > 3  # the offset's error follows the slow turn
+    assert m["depth_rms_offset"] == pytest.approx(1.0, rel=0.1)
+    assert m["depth_inflation_offset"] == pytest.approx(1.0, abs=0.3)
+    line = depth_table({"structured_light": {"default": m}})[-2]
+    assert line.startswith("| structured_light | ") and line.count("|") == 7, line
+    assert depth_errors(blobs(np.full(uv.shape[:2], np.nan)), uv, vis, points, normals, t,
+                        525.0, 525.0) == {}
 
 
 def test_every_effect_has_a_condition_and_the_combined_ones_exist():
