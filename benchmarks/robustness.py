@@ -316,7 +316,8 @@ def depth_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
         "half-second sums over white noise's (1: white, ~16: constant over the half second), "
         "the errors a filter weighing half a second of frames as independent meets; then the "
         "fixed colour-depth offset fitted to them (the depth read off the blob, on the hand's "
-        "tilted surface), and what is left. Mean over the seeds.",
+        "tilted surface), and what is left. The truth's marker centres leave out the MCP "
+        "markers' skin slide, which shows here as error under soft tissue. Mean over the seeds.",
         "",
         "| condition | rms (mm) | inflation | offset fitted (px) | rms less the offset (mm) | "
         "inflation less the offset |",
