@@ -1,12 +1,13 @@
 """tracking.neutral: W0 and the layout from the still start, and the change of frame.
 
-Truth: the measurement-level simulator (0.7 px blobs, Kinect-like depth) on a still hand whose
+Truth: the measurement-level simulator (0.3 px blobs, Kinect-like depth) on a still hand whose
 pose is known; the change of frame is checked against the marker positions it must keep.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from wristtrack.camera import Camera
@@ -20,6 +21,7 @@ from wristtrack.tracking.neutral import (
     STILL_PX,
     StillStart,
     reanchor,
+    still_pixel_sigma,
 )
 from wristtrack.tracking.observation import MeasurementNoise
 from wristtrack.tracking.pose_fit import initial_guess, refine_pose
@@ -80,6 +82,109 @@ def test_still_start_w0_and_layout_beat_one_frame():
     rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
     assert rms(many_rot) < rms(one_rot) / 2.5, (rms(one_rot), rms(many_rot))
     assert rms(many_h) < rms(one_h) / 2.5, (rms(one_h), rms(many_h))
+
+
+def _still_start(frames, offsets: np.ndarray | None = None) -> StillStart:
+    """A StillStart over simulated ``frames``, each marker's blob moved by the same
+    ``offsets`` (6, 2) px in every frame (None: as drawn)."""
+    still = StillStart(Camera.default())
+    zero = np.zeros(3)
+    for f in frames:
+        det = f.detections
+        if offsets is not None:
+            marker = f.labels >= 0
+            det.uv[marker] += offsets[f.labels[marker]]
+        still.add(det, f.labels, zero, zero)
+    return still
+
+
+def _sigma_at(still: StillStart, layout: HandLayout, R: np.ndarray, t: np.ndarray) -> float:
+    R_w, t_w, _ = still.w0(layout, R, t)
+    at_fit = still.camera.project(layout.points @ R_w.T + t_w)
+    return still_pixel_sigma(np.array(still.uv) - at_fit)
+
+
+def test_the_still_starts_pixels_are_worth_their_fresh_noise_or_sqrt_n_their_constant_one():
+    """White blob noise (the simulator's 0.3 px), fresh in every frame: the pixels are worth
+    that each (the scatter of the markers' means over 15 frames, times sqrt(15)). Errors of
+    0.08 px the same in every frame (and 0.005 px fresh): worth sqrt(15) x 0.08 = 0.31 px each,
+    not 0.08. Mean of the variance over 40 still starts (one start has 6 degrees of freedom)."""
+    cam, layout = Camera.default(), arched()
+    rng = np.random.default_rng(7)
+    drawn = NoiseModel().pixel_sigma  # what still_frames draws
+    white, constant = [], []
+    for _ in range(40):
+        R, t, frames = still_frames(layout, rng)
+        white.append(_sigma_at(_still_start(frames), layout, R, t) ** 2)
+        traj_frames = still_frames(layout, rng)
+        R2, t2 = traj_frames[0], traj_frames[1]
+        sharp = traj_frames[2]
+        for f in sharp:  # the drawn noise taken back to 0.005 px
+            marker = f.labels >= 0
+            truth = cam.project(layout.points @ R2.T + t2)[f.labels[marker]]
+            f.detections.uv[marker] = truth + (f.detections.uv[marker] - truth) * (0.005 / drawn)
+        offsets = rng.normal(0.0, 0.08, (6, 2))
+        constant.append(_sigma_at(_still_start(sharp, offsets), layout, R2, t2) ** 2)
+    # the fit gives up fewer than 6 degrees of freedom to the pixels where depth carries part
+    # of the pose: the sigma errs large, by up to sqrt(12 / 6) where depth carries all of it
+    assert drawn <= np.sqrt(np.mean(white)) < drawn * np.sqrt(2)
+    worth = 0.08 * np.sqrt(STILL_FRAMES)
+    assert worth * 0.9 <= np.sqrt(np.mean(constant)) < worth * np.sqrt(2)
+
+
+def test_errors_that_drift_over_the_still_start_count_as_not_averaging():
+    """Residuals built by hand: fresh noise alone gives its sigma back; the four MCP markers
+    drifting together by 0.6 px over 15 frames (a skin slide) on top count as the drift's mean
+    and its spread about it, sqrt(n) times, not as fresh noise the frames average."""
+    rng = np.random.default_rng(2)
+    n = STILL_FRAMES
+    fresh = rng.normal(0.0, 0.05, (2000, n, 6, 2))
+    white = np.mean([still_pixel_sigma(r) ** 2 for r in fresh])
+    # 12 coordinates less 6: the 6 of a fit these residuals did not have give back 12/6 of it;
+    # the slow part's estimate, kept at 0 or more, errs large by about a tenth on fresh noise
+    assert 1.0 <= np.sqrt(white * 6 / 12) / 0.05 < 1.15
+    drift = np.zeros((n, 6, 2))
+    drift[:, 2:, 0] = np.linspace(0.0, 0.6, n)[:, None]  # MCPs, along u
+    sigma = still_pixel_sigma(fresh[0] + drift)
+    mean = drift.mean(axis=0)
+    # n |mean|^2 over 12 - 6, and n times the drift's spread about its mean over 12 (n - 1)
+    by_hand = n * np.sum(mean**2) / 6 + n * np.sum((drift - mean) ** 2) / (12 * (n - 1))
+    assert sigma**2 == pytest.approx(by_hand, rel=0.05)
+    averaged = n * np.sum(mean**2) / 6 + np.sum((drift - mean) ** 2) / (12 * (n - 1))
+    assert sigma**2 > 1.1 * averaged  # more than were the drift fresh noise
+    assert still_pixel_sigma(np.full((n, 6, 2), np.nan)) is None
+    three = fresh[0].copy()
+    three[:, 3:] = np.nan
+    assert still_pixel_sigma(three) is None  # 3 markers: 6 coordinates, all the pose's
+
+
+def test_w0_weighs_pixels_that_do_not_average_at_their_worth():
+    """Blob errors of 0.04 px the same in every still frame, depth with its fresh noise: W0
+    with the pixels at their worth over the frames is closer to the true pose than with the
+    filter's 0.3 px (which leaves the tilt to the depth) and than with the blobs' own 0.04 px
+    taken as fresh in every frame (which leaves it to the pixels' fixed errors). The depth is
+    taken at the noise it is drawn with."""
+    cam, layout = Camera.default(), arched()
+    rng = np.random.default_rng(11)
+    depth_model = MeasurementNoise(depth_coeff=NoiseModel().depth_sigma_coeff, depth_offset=0.0,
+                                   depth_z0=0.0)
+    errors = {"worth": [], "model": [], "fresh": []}
+    for _ in range(30):
+        R, t, frames = still_frames(layout, rng)
+        for f in frames:
+            marker = f.labels >= 0
+            truth = cam.project(layout.points @ R.T + t)[f.labels[marker]]
+            f.detections.uv[marker] = truth
+        still = _still_start(frames, rng.normal(0.0, 0.04, (6, 2)))
+        errors["worth"].append(angle_deg(still.w0(layout, R, t, depth_model)[0], R))
+        uv, depth = np.concatenate(still.uv), np.concatenate(still.depth)
+        stacked = HandLayout(np.tile(layout.points, (len(still.uv), 1)))
+        sz = depth_model.depth_sigma(np.nan_to_num(depth, nan=1.0))
+        for name, sigma in (("model", 0.3), ("fresh", 0.04)):
+            fit = refine_pose(uv, depth, cam, stacked, R, t, sigma, sz)
+            errors[name].append(angle_deg(fit.R_ch, R))
+    rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in errors.items()}
+    assert rms["worth"] < 0.9 * min(rms["model"], rms["fresh"]), rms
 
 
 def test_still_start_ends_when_the_hand_moves_and_needs_enough_frames():

@@ -12,6 +12,9 @@ over the first tracked frames while the filter says the hand is still, and then 
   :func:`wristtrack.tracking.pose_fit.refine_pose` over the stacked markers), with its
   covariance, which the tracker adds to the uncertainty of every relative pose. (Not the
   filtered pose: at rest the filter, tuned to follow motion, is no better than one frame.)
+  The pixels are weighed at what they are worth over the still frames (:func:`still_pixel_sigma`):
+  a still hand's blobs are the same blobs in every frame, and the part of their errors that is
+  the same in every frame does not average as the depth's fresh noise does.
 - the frames' depth images, from which the tracker learns the shape of the skin between the
   markers (:func:`wristtrack.tracking.surface.learn_surface`).
 
@@ -30,6 +33,7 @@ from wristtrack.errors import ConfigError, InitialisationError, InputError
 from wristtrack.geometry import skew
 from wristtrack.hand import HandLayout, average_layout, fit_pose
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.pixel_noise import SIGMA_FLOOR
 from wristtrack.tracking.pose_fit import refine_pose
 
 STILL_FRAMES = 15  # frames averaged (0.5 s at 30 fps: the paper's still start)
@@ -123,24 +127,80 @@ class StillStart:
     def w0(self, layout: HandLayout, R0: np.ndarray, t0: np.ndarray,
            noise: MeasurementNoise | None = None, min_frames: int = MIN_FRAMES):
         """(R_ch, t_ch, cov (6,6)) of the hand over the still start with ``layout``: one pose
-        fitted to every frame's markers (start R0, t0), weighted as the filter weighs them
-        (``noise``: its pixel sigma and depth model, floor included: a structured-light
-        camera's depth errors are correlated in time too, so more frames do not make depth
-        sharper than that floor); None with fewer than ``min_frames`` frames or no fit.
+        fitted to every frame's markers (start R0, t0), the depth weighted as the filter weighs
+        it (``noise``'s depth model, floor included: a structured-light camera's depth errors
+        are correlated in time too, so more frames do not make depth sharper than that floor),
+        the pixels first at ``noise``'s pixel sigma, then again at what the fit shows them
+        worth over the frames (:func:`still_pixel_sigma`); None with fewer than
+        ``min_frames`` frames or no fit.
         """
         if len(self.uv) < max(min_frames, 1):
             return None
         n = len(self.uv)
         stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times
         noise = noise or MeasurementNoise()
-        depth = np.concatenate(self.depth)
+        uv, depth = np.concatenate(self.uv), np.concatenate(self.depth)
         sz = noise.depth_sigma(np.nan_to_num(depth, nan=1.0))
         try:
-            fit = refine_pose(np.concatenate(self.uv), depth, self.camera, stacked, R0, t0,
-                              noise.pixel_sigma, sz)
+            fit = refine_pose(uv, depth, self.camera, stacked, R0, t0, noise.pixel_sigma, sz)
+            at_fit = self.camera.project(layout.points @ fit.R_ch.T + fit.t_ch)
+            pixel_sigma = still_pixel_sigma(np.array(self.uv) - at_fit)
+            if pixel_sigma is not None:
+                fit = refine_pose(uv, depth, self.camera, stacked, fit.R_ch, fit.t_ch,
+                                  pixel_sigma, sz)
         except InitialisationError:
             return None
         return fit.R_ch, fit.t_ch, fit.cov
+
+
+def still_pixel_sigma(residuals: np.ndarray) -> float | None:
+    """The pixel sigma (px) a still start's blobs are worth, each frame's taken once in one fit
+    of the pose to all the frames: ``residuals`` (frames, markers, 2) the blobs less the
+    markers' image at the fitted pose (NaN where a marker was not seen).
+
+    A blob's error is partly fresh in every frame (the sensor's noise), partly the same in every
+    frame of a still hand (the pixel grid, the shading, the codec's blocks) and partly slow (the
+    skin sliding as the fingers move, the hand settling). The frames average the fresh part
+    only: n frames are worth one blob at the variance of their mean plus the slow part's, so
+    each of the n stacked is worth n times that. Per coordinate:
+
+    - the markers' mean residuals about the fit give n (constant + slow mean) + fresh: sum_j
+      n_j |mean_j|^2 over 2 per marker less the pose's 6 (more than the pixels give up where
+      depth carries part of the pose: the sigma errs large);
+    - the spread of each marker about its mean gives fresh + slow, its frame-to-frame
+      differences fresh alone (half their mean square): the slow part's variance is the
+      difference, which the frames do not average either, so it counts n times.
+
+    White blob noise gives its own sigma back (a tenth more: the slow part's estimate is kept
+    at 0 or more); errors the same in every frame, sqrt(n) times theirs. Until this, the
+    pixels were taken at the filter's model (0.3 px), and sharp rendered blobs (0.015-0.025 px,
+    the same in every frame: 0.07-0.13 px worth over 15 frames) left W0 to the depth, whose
+    errors tilted it, and every relative angle with it. Worst range-of-motion error, rendered
+    recordings (seeds 0-5): clean 0.129 -> 0.092 deg, structured light 0.187 -> 0.133, JPEG
+    0.322 -> 0.306, shutter and specular (seeds 3-9) 0.215 -> 0.151 and 0.124 -> 0.087; every
+    effect (seeds 0-9) 0.805 -> 0.785, smoothed 0.615 -> 0.584, left hands 1.108 -> 1.106;
+    H.264 and Bayer within 0.005; orientation RMSE within 0.006 deg everywhere (soft tissue,
+    whose fingers flex through the still start, 0.273 -> 0.267). At least SIGMA_FLOOR; None
+    where the markers leave no residual to measure (3 or fewer).
+    """
+    seen = np.isfinite(residuals).all(axis=2)
+    count = seen.sum(axis=0)
+    markers = count > 0
+    dof = 2 * int(markers.sum()) - 6
+    if dof <= 0:
+        return None
+    r = np.where(seen[..., None], residuals, 0.0)
+    mean = r.sum(axis=0) / np.maximum(count, 1)[:, None]
+    variance = float(np.sum(count[:, None] * mean**2)) / dof  # n (constant + slow) + fresh
+    spread_dof = 2 * int(np.sum(np.maximum(count - 1, 0)))
+    both = seen[1:] & seen[:-1]
+    if spread_dof > 0 and both.any():
+        spread = float(np.sum(np.where(seen[..., None], r - mean, 0.0) ** 2)) / spread_dof
+        step = np.where(both[..., None], r[1:] - r[:-1], 0.0)
+        fresh = float(np.sum(step**2)) / (2 * 2 * int(both.sum()))
+        variance += len(residuals) * max(spread - fresh, 0.0)  # the slow part, not averaged
+    sigma = float(np.sqrt(variance))
+    return max(sigma, SIGMA_FLOOR) if np.isfinite(sigma) else None
 
 
 def reanchor(
