@@ -286,30 +286,21 @@ def robustness_sections(
 
 def blob_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
     """The detector's blob centres against the truth per condition (:func:`blob_errors`)."""
-    lines = [
+    return _detector_table(
+        acc,
         "The detector's blob centres against the truth (the same blobs for every tracker): each "
         f"visible marker's nearest blob within {USED_PX:g} px, mean over the seeds; doubted: "
         "clipped, split, elongated, on the border, a streak (taken at the model's pixel noise).",
-        "",
-        "| condition | rms (px) | rms, undoubted (px) | median (px) | doubted | markers with a "
-        "blob |",
-        "|---|---|---|---|---|---|",
-    ]
-    for condition, rows in acc.items():
-        m = next(iter(rows.values()))
-        if "blob_rms" not in m:
-            continue
-        lines.append(
-            f"| {condition} | {_f(m['blob_rms'], '.3f')} | {_f(m['blob_rms_undoubted'], '.3f')} "
-            f"| {_f(m['blob_median'], '.3f')} | {_f(100 * m['blob_doubted'], '.1f')}% | "
-            f"{_f(100 * m['blob_found'], '.1f')}% |"
-        )
-    return [*lines, ""]
+        (("rms (px)", "blob_rms", ".3f"), ("rms, undoubted (px)", "blob_rms_undoubted", ".3f"),
+         ("median (px)", "blob_median", ".3f"), ("doubted", "blob_doubted", "%"),
+         ("markers with a blob", "blob_found", "%")),
+    )
 
 
 def depth_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
     """The markers' depth as read against the truth per condition (:func:`depth_errors`)."""
-    lines = [
+    return _detector_table(
+        acc,
         "The markers' depth as the detector read it against the truth (the same for every "
         "tracker; conditions with hand.json: their twins without it are the same recordings): "
         "each marker's mean error taken out, rms per frame; the inflation is the variance of "
@@ -318,20 +309,27 @@ def depth_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
         "fixed colour-depth offset fitted to them (the depth read off the blob, on the hand's "
         "tilted surface), and what is left. The truth's marker centres leave out the MCP "
         "markers' skin slide, which shows here as error under soft tissue. Mean over the seeds.",
-        "",
-        "| condition | rms (mm) | inflation | offset fitted (px) | rms less the offset (mm) | "
-        "inflation less the offset |",
-        "|---|---|---|---|---|---|",
-    ]
+        (("rms (mm)", "depth_rms", ".2f"), ("inflation", "depth_inflation", ".1f"),
+         ("offset fitted (px)", "depth_offset", ".2f"),
+         ("rms less the offset (mm)", "depth_rms_offset", ".2f"),
+         ("inflation less the offset", "depth_inflation_offset", ".1f")),
+    )
+
+
+def _detector_table(acc: dict[str, dict[str, dict[str, float]]], intro: str,
+                    columns: tuple[tuple[str, str, str], ...]) -> list[str]:
+    """A table of the detector's figures per condition (the same for every tracker: the first
+    tracker's row), ``columns`` (heading, key, format; '%': a share in per cent), the
+    conditions without the first key left out."""
+    lines = [intro, "", "| condition | " + " | ".join(c[0] for c in columns) + " |",
+             "|---" * (len(columns) + 1) + "|"]
     for condition, rows in acc.items():
         m = next(iter(rows.values()))
-        if "depth_rms" not in m:
+        if columns[0][1] not in m:
             continue
-        lines.append(
-            f"| {condition} | {_f(m['depth_rms'], '.2f')} | {_f(m['depth_inflation'], '.1f')} | "
-            f"{_f(m['depth_offset'], '.2f')} | {_f(m['depth_rms_offset'], '.2f')} | "
-            f"{_f(m['depth_inflation_offset'], '.1f')} |"
-        )
+        cells = [f"{_f(100 * m[key], '.1f')}%" if fmt == "%" else _f(m[key], fmt)
+                 for _, key, fmt in columns]
+        lines.append(f"| {condition} | " + " | ".join(cells) + " |")
     return [*lines, ""]
 
 
