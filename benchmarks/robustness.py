@@ -27,7 +27,7 @@ from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 from wristtrack.sim.render import render_recording
 from wristtrack.sim.scenes import make_scene
 from wristtrack.tracking.observation import registration_depth_jacobian
-from wristtrack.tracking.pixel_noise import WINDOW_S, BlobCorrelation
+from wristtrack.tracking.pixel_noise import WINDOW_S, BlobCorrelation, worst_inflation
 
 BASE_SCENARIO = "no_hand"  # the 'mix' movement, all three axes; hand.json per condition
 USED_PX = 3.0
@@ -217,13 +217,13 @@ def depth_errors(detections: list, uv: np.ndarray, vis: np.ndarray, points: np.n
     ok = np.isfinite(e)
     if ok.sum() < 8:
         return {}
-    rest = e - np.nanmean(np.where(ok, e, np.nan), axis=0)
+    rest = e - np.nansum(e, axis=0) / np.maximum(ok.sum(axis=0), 1)  # each marker's mean out
     marker = np.nonzero(ok)[1]
     A = np.concatenate((G[ok], np.eye(6)[marker]), axis=1)
     fit, *_ = np.linalg.lstsq(A, e[ok], rcond=None)
     after = np.full_like(e, np.nan)
     after[ok] = e[ok] - A @ fit
-    frames = int(round(WINDOW_S / float(np.median(np.diff(times))))) + 1 if n > 1 else 1
+    frames = int(worst_inflation(float(np.median(np.diff(times)))) or 1) if n > 1 else 1
     return {
         "depth_rms": 1e3 * _rms(rest[ok]), "depth_inflation": _inflation(rest, frames),
         "depth_offset": float(np.linalg.norm(fit[:2])),

@@ -139,12 +139,13 @@ class StillStart:
         n = len(self.uv)
         stacked = HandLayout(np.tile(layout.points, (n, 1)))  # the same markers, n times
         noise = noise or MeasurementNoise()
-        uv, depth = np.concatenate(self.uv), np.concatenate(self.depth)
+        frames = np.array(self.uv)  # (n, 6, 2)
+        uv, depth = frames.reshape(-1, 2), np.concatenate(self.depth)
         sz = noise.depth_sigma(np.nan_to_num(depth, nan=1.0))
         try:
             fit = refine_pose(uv, depth, self.camera, stacked, R0, t0, noise.pixel_sigma, sz)
             at_fit = self.camera.project(layout.points @ fit.R_ch.T + fit.t_ch)
-            pixel_sigma = still_pixel_sigma(np.array(self.uv) - at_fit)
+            pixel_sigma = still_pixel_sigma(frames - at_fit)
             if pixel_sigma is not None:
                 fit = refine_pose(uv, depth, self.camera, stacked, fit.R_ch, fit.t_ch,
                                   pixel_sigma, sz)
