@@ -98,6 +98,15 @@ def _still_start(frames, offsets: np.ndarray | None = None) -> StillStart:
     return still
 
 
+def _sharpen(frames, layout: HandLayout, R: np.ndarray, t: np.ndarray, share: float) -> None:
+    """Each drawn blob's error scaled by ``share`` (0: exactly on its marker), in place."""
+    truth = Camera.default().project(layout.points @ R.T + t)
+    for f in frames:
+        marker = f.labels >= 0
+        uv = f.detections.uv[marker]
+        f.detections.uv[marker] = truth[f.labels[marker]] + (uv - truth[f.labels[marker]]) * share
+
+
 def _sigma_at(still: StillStart, layout: HandLayout, R: np.ndarray, t: np.ndarray) -> float:
     R_w, t_w, _ = still.w0(layout, R, t)
     at_fit = still.camera.project(layout.points @ R_w.T + t_w)
@@ -109,20 +118,15 @@ def test_the_still_starts_pixels_are_worth_their_fresh_noise_or_sqrt_n_their_con
     that each (the scatter of the markers' means over 15 frames, times sqrt(15)). Errors of
     0.08 px the same in every frame (and 0.005 px fresh): worth sqrt(15) x 0.08 = 0.31 px each,
     not 0.08. Mean of the variance over 40 still starts (one start has 6 degrees of freedom)."""
-    cam, layout = Camera.default(), arched()
+    layout = arched()
     rng = np.random.default_rng(7)
     drawn = NoiseModel().pixel_sigma  # what still_frames draws
     white, constant = [], []
     for _ in range(40):
         R, t, frames = still_frames(layout, rng)
         white.append(_sigma_at(_still_start(frames), layout, R, t) ** 2)
-        traj_frames = still_frames(layout, rng)
-        R2, t2 = traj_frames[0], traj_frames[1]
-        sharp = traj_frames[2]
-        for f in sharp:  # the drawn noise taken back to 0.005 px
-            marker = f.labels >= 0
-            truth = cam.project(layout.points @ R2.T + t2)[f.labels[marker]]
-            f.detections.uv[marker] = truth + (f.detections.uv[marker] - truth) * (0.005 / drawn)
+        R2, t2, sharp = still_frames(layout, rng)
+        _sharpen(sharp, layout, R2, t2, 0.005 / drawn)  # the drawn noise taken to 0.005 px
         offsets = rng.normal(0.0, 0.08, (6, 2))
         constant.append(_sigma_at(_still_start(sharp, offsets), layout, R2, t2) ** 2)
     # the fit gives up fewer than 6 degrees of freedom to the pixels where depth carries part
@@ -171,10 +175,7 @@ def test_w0_weighs_pixels_that_do_not_average_at_their_worth():
     errors = {"worth": [], "model": [], "fresh": []}
     for _ in range(30):
         R, t, frames = still_frames(layout, rng)
-        for f in frames:
-            marker = f.labels >= 0
-            truth = cam.project(layout.points @ R.T + t)[f.labels[marker]]
-            f.detections.uv[marker] = truth
+        _sharpen(frames, layout, R, t, 0.0)
         still = _still_start(frames, rng.normal(0.0, 0.04, (6, 2)))
         errors["worth"].append(angle_deg(still.w0(layout, R, t, depth_model)[0], R))
         uv, depth = np.concatenate(still.uv), np.concatenate(still.depth)
