@@ -54,6 +54,8 @@ import math
 
 import numpy as np
 
+from wristtrack.tracking.pose_fit import pinhole_jacobian, point_jacobian
+
 WINDOW_S = 0.5  # the span of frames whose errors the filter weighs together
 _SPAN_TOLERANCE = 1e-6  # s: 15 x 1/30 s sums to 0.5 - 6e-17, which closes a window
 TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
@@ -177,17 +179,12 @@ def fit_residuals(obs, X: np.ndarray, labels: np.ndarray,
 
 
 def _motion_jacobian(obs, X: np.ndarray) -> np.ndarray:
-    """(F, J, 2, 6) change of the markers' pixels per small rotation and translation of the
-    hand in the camera frame (pinhole: distortion hardly turns these directions)."""
-    pts = obs.marker_points(X)  # (F, J, 3)
-    x, y, z = pts[..., 0], pts[..., 1], pts[..., 2]
-    fx, fy = obs.camera.fx, obs.camera.fy
-    zero = np.zeros_like(z)
-    proj = np.stack((np.stack((fx / z, zero, -fx * x / z**2), axis=-1),
-                     np.stack((zero, fy / z, -fy * y / z**2), axis=-1)), axis=-2)  # (F,J,2,3)
-    cross = np.stack((np.stack((zero, z, -y), axis=-1), np.stack((-z, zero, x), axis=-1),
-                      np.stack((y, -x, zero), axis=-1)), axis=-2)  # d(w x p)/dw = -[p]x
-    return np.concatenate((proj @ cross, proj), axis=-1)
+    """(F, J, 2, 6) change of the markers' pixels per small rotation (about the camera's origin)
+    and translation of the hand in the camera frame (pinhole: distortion hardly turns these
+    directions)."""
+    pts = obs.marker_points(X).reshape(-1, 3)  # (F*J, 3)
+    J = pinhole_jacobian(obs.camera, pts) @ point_jacobian(pts, np.zeros(3))
+    return J.reshape(*X.shape[:1], obs.n_markers, 2, 6)
 
 
 def _slide_columns(obs, x: np.ndarray, frames: int) -> np.ndarray:

@@ -51,7 +51,7 @@ def pinhole_jacobian(camera: Camera, X: np.ndarray) -> np.ndarray:
     return J
 
 
-def _point_jacobian(X: np.ndarray, t: np.ndarray) -> np.ndarray:
+def point_jacobian(X: np.ndarray, t: np.ndarray) -> np.ndarray:
     """dX/d(dphi, dt) for X = exp(dphi) R p + t + dt at dphi = 0: [-[R p]x, I] -> (N,3,6)."""
     J = np.empty((X.shape[0], 3, 6))
     J[:, :, :3] = -skew(X - t)
@@ -112,8 +112,8 @@ def refine_pose(
     def normal_equations(
         t: np.ndarray, r: np.ndarray, Xv: np.ndarray, Xd: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        Jpx = (pinhole_jacobian(camera, Xv) @ _point_jacobian(Xv, t)).reshape(-1, 6)
-        Jz = _point_jacobian(Xd, t)[:, 2, :]
+        Jpx = (pinhole_jacobian(camera, Xv) @ point_jacobian(Xv, t)).reshape(-1, 6)
+        Jz = point_jacobian(Xd, t)[:, 2, :]
         J = np.concatenate([Jpx / pixel_sigma, Jz / sz[:, None]])
         return J.T @ J, J.T @ r
 
