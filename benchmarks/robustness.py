@@ -25,7 +25,7 @@ from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, Row, recorded_detections
 from wristtrack.hand import MARKER_NAMES
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 from wristtrack.sim.render import render_recording
-from wristtrack.sim.scenes import make_scene
+from wristtrack.sim.scenes import make_scene, mirrored
 from wristtrack.tracking.observation import registration_depth_jacobian
 from wristtrack.tracking.pixel_noise import WINDOW_S, BlobCorrelation, worst_inflation
 
@@ -45,6 +45,10 @@ CONDITIONS: dict[str, dict[str, Any]] = {
     "all, no hand.json": {"effects": list(PRESET_REAL), "write_hand": False},
     "all, left hand, no hand.json": {"effects": list(PRESET_REAL), "hand_side": "left",
                                      "write_hand": False},
+    # The rows above move both hands through the same rotations in the camera's frame, so each
+    # hand makes its own signs of deviation and pronation. A right hand making the left hand's
+    # (ulnar deviation with supination) turns its back away from the lamp at the extremes.
+    "all, right hand, mirrored movement": {"effects": list(PRESET_REAL), "mirror_movement": True},
 }
 
 TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURACY_ROWS
@@ -64,7 +68,10 @@ def render_condition(cache: Path, condition: str, seed: int, n_frames: int | Non
     simulator may have changed since a cached copy)."""
     spec = dict(CONDITIONS[condition])
     write_hand = spec.pop("write_hand", True)
+    mirror = spec.pop("mirror_movement", False)
     scene = make_scene(BASE_SCENARIO, seed, **spec)
+    if mirror:
+        scene = replace(scene, motion=mirrored(scene.motion))
     # A reduced run keeps the natural speed: the first n_frames frames, not the whole movement
     # squeezed into them.
     times = scene.times[:n_frames] if n_frames else scene.times

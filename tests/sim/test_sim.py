@@ -236,3 +236,23 @@ def test_near_clutter_lands_next_to_the_markers():
         markers = f.detections.uv[f.labels >= 0]
         for blob in f.detections.uv[f.labels < 0]:
             assert np.linalg.norm(markers - blob, axis=1).min() < 8.0 * 6
+
+
+def test_mirrored_movement_is_the_other_hands_movement_seen_in_a_mirror():
+    """A right hand making the mirrored movement is, marker for marker, the mirror image across
+    the hand's XZ plane of the left hand making the original one; and the ISB angles (signed per
+    side) are the same anatomical angles."""
+    from wristtrack.geometry import wrist_angles
+    from wristtrack.sim.scenes import make_scene, mirrored
+
+    motion = make_scene("no_hand", 0).motion
+    t = np.linspace(0.0, motion.duration, 97)
+    right, left = HandLayout.default(), HandLayout.default().mirrored()
+    M = np.diag([1.0, -1.0, 1.0])
+    R, p = motion.pose(t)
+    Rm, pm = mirrored(motion).pose(t)
+    left_pts = np.einsum("nij,kj->nki", R, left.points) + p[:, None]
+    right_pts = np.einsum("nij,kj->nki", Rm, right.points) + pm[:, None]
+    np.testing.assert_allclose(right_pts, left_pts @ M, atol=1e-12)
+    np.testing.assert_allclose(wrist_angles(Rm, "right"), wrist_angles(R, "left"), atol=1e-9)
+    assert np.ptp(wrist_angles(R, "right")[:, 2]) > np.radians(20)  # it does pronate

@@ -99,6 +99,20 @@ class Scene:
         return 1.0 / float(np.median(np.diff(self.times))) if len(self.times) > 1 else 30.0
 
 
+def mirrored(motion: Motion) -> Motion:
+    """The same movement made the other way across the hand: deviation and pronation of the
+    opposite sign (ulnar for radial, supination for pronation), flexion as it is, and the wrist's
+    path mirrored sideways (W0's Y). What the other hand does when it makes the same anatomical
+    movement, in a scene whose hand is not mirrored: with a left hand, the right hand's
+    anatomical movement, and the reverse."""
+    sign, side = np.array([-1.0, 1.0, -1.0]), np.array([1.0, -1.0, 1.0])
+    return Motion(
+        lambda t: motion.angles(t) * sign,
+        lambda t: motion.position(t) * side,
+        motion.duration,
+    )
+
+
 def time_scaled(motion: Motion, factor: float) -> Motion:
     """The same movement played ``factor`` times faster (factor < 1: slower)."""
     if not factor > 0:
