@@ -1,6 +1,7 @@
-"""Motion-blurred markers (detect/streaks.py) against drawn truth: a disc of marker colour swept
-across skin during the exposure (the mean of many sharp renders), whose centre at mid-exposure
-is known, and a rendered fast reach under a 1/30 s shutter."""
+"""Markers found by chromaticity (detect/streaks.py) against drawn truth: a disc of marker colour
+swept across skin during the exposure (the mean of many sharp renders), whose centre at
+mid-exposure is known; markers in the shade, dark and desaturated on skin whose chromaticity
+has drifted toward theirs; and a rendered fast reach under a 1/30 s shutter."""
 
 from __future__ import annotations
 
@@ -10,16 +11,18 @@ import pytest
 
 from wristtrack.camera import Camera
 from wristtrack.detect.detector import DetectorConfig, MarkerDetector
-from wristtrack.detect.streaks import find_streaks
+from wristtrack.detect.streaks import STREAK_RATIO, find_chroma_blobs
 
 SKIN = np.array([121.0, 147.0, 199.0])
 MARKER = np.array([173.0, 83.0, 38.0])
 
 
-def swept_disc(start, end, diameter=10.0, shade=1.0, seed=0, size=(160, 200), offsets=((0, 0),)):
+def swept_disc(start, end, diameter=10.0, shade=1.0, seed=0, size=(160, 200), offsets=((0, 0),),
+               skin=SKIN, marker=MARKER):
     """BGR image of a disc swept from ``start`` to ``end`` over skin (mean of 64 sharp discs,
     each anti-aliased by 8x supersampling), with sensor noise; truth: the mid-point. With
-    ``offsets``, one such disc at each offset (pixels) from the first."""
+    ``offsets``, one such disc at each offset (pixels) from the first; ``skin`` and ``marker``
+    the two colours at full light."""
     h, w = size
     acc = np.zeros((h, w), np.float64)
     for s in np.linspace(0.0, 1.0, 64):
@@ -32,7 +35,7 @@ def swept_disc(start, end, diameter=10.0, shade=1.0, seed=0, size=(160, 200), of
                        shift=4)
         acc += cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA) / 255.0
     a = (acc / 64)[..., None]
-    img = shade * ((1 - a) * SKIN + a * MARKER)
+    img = shade * ((1 - a) * skin + a * marker)
     img += np.random.default_rng(seed).normal(0, 2.0, img.shape)
     return np.clip(np.round(img), 0, 255).astype(np.uint8), (np.asarray(start) + end) / 2
 
@@ -43,7 +46,7 @@ def test_streak_centre_is_the_mid_exposure_centre(length, angle, shade):
     start = np.array([100.0, 80.0]) - 0.5 * length * np.array([np.cos(angle), np.sin(angle)])
     end = start + length * np.array([np.cos(angle), np.sin(angle)])
     img, truth = swept_disc(start, end, shade=shade, seed=int(length))
-    found = find_streaks(img, None, (0, 0, img.shape[1], img.shape[0]), MARKER, SKIN, 10.0)
+    found = find_chroma_blobs(img, None, (0, 0, img.shape[1], img.shape[0]), MARKER, SKIN, 10.0)
     assert len(found) == 1, found
     u, v, z, long, wide, direction = found[0]
     # (a sharp blob is found to ~0.05 px; a faint 50 px streak to a few tenths)
@@ -54,11 +57,38 @@ def test_streak_centre_is_the_mid_exposure_centre(length, angle, shade):
     assert abs(turn) < 0.05
 
 
-def test_a_sharp_marker_or_plain_skin_is_not_a_streak():
-    img, _ = swept_disc((100.0, 80.0), (100.5, 80.0))
-    assert find_streaks(img, None, (0, 0, 200, 160), MARKER, SKIN, 10.0) == []
+def test_a_sharp_marker_is_one_marker_long_and_plain_skin_gives_nothing():
+    img, truth = swept_disc((100.0, 80.0), (100.5, 80.0))
+    (u, v, _, long, _, _), = find_chroma_blobs(img, None, (0, 0, 200, 160), MARKER, SKIN, 10.0)
+    assert long < STREAK_RATIO * 10.0 and np.hypot(u - truth[0], v - truth[1]) < 0.1
     skin = np.clip(np.random.default_rng(1).normal(SKIN, 2.0, (160, 200, 3)), 0, 255)
-    assert find_streaks(skin.astype(np.uint8), None, (0, 0, 200, 160), MARKER, SKIN, 10.0) == []
+    assert find_chroma_blobs(skin.astype(np.uint8), None, (0, 0, 200, 160), MARKER, SKIN,
+                             10.0) == []
+
+
+# In the lamp's shade (a third of full light) the markers lose most of their saturation to the
+# codec and the demosaicing (rendered: S 0.3-0.5, V 40-60), and the skin's chromaticity drifts
+# toward the marker's (t 0.1-0.2 on the lit skin-to-marker segment).
+SHADE = 0.33
+MARKER_SHADE = 0.45 * MARKER + 0.55 * MARKER.mean()  # saturation 0.78 -> 0.35
+SKIN_SHADE = 0.85 * SKIN + 0.15 * MARKER
+
+
+def shaded_markers(seed=0, offsets=((0, 0), (0, 30), (25, 55))):
+    return swept_disc((30.0, 50.0), (30.4, 50.0), shade=SHADE, seed=seed, offsets=offsets,
+                      skin=SKIN_SHADE, marker=MARKER_SHADE)
+
+
+def test_markers_in_the_shade_are_found_above_the_skin_around_them():
+    offsets = ((0, 0), (0, 30), (25, 55))
+    img, mid = shaded_markers(offsets=offsets)
+    found = find_chroma_blobs(img, None, (0, 0, 200, 160), MARKER, SKIN, 10.0)
+    uv = np.array([f[:2] for f in found])
+    truth = mid + np.array(offsets)
+    assert len(found) == 3, found
+    err = np.linalg.norm(truth[:, None] - uv[None], axis=2).min(1)
+    assert np.all(err < 0.3), err
+    assert all(f[3] < STREAK_RATIO * 10.0 for f in found)
 
 
 def test_detector_recovers_blurred_markers_while_tracking():
@@ -83,3 +113,36 @@ def test_detector_recovers_blurred_markers_while_tracking():
     truth = mid + np.array(offsets) + (200, 200)
     err = np.linalg.norm(truth[:, None] - d.uv[None], axis=2).min(1)
     assert np.all(err < 0.5), err
+
+
+def test_detector_finds_markers_in_the_shade_while_tracking():
+    """Three markers tracked under the lamp, then the hand turns into the shade: dark and
+    desaturated, they fail the colour reference (no blob at all), and the search by
+    chromaticity in the tracking window finds them as suspect 'shade' blobs at their centres.
+    The window outlives the frames without blobs by RECENT_WINDOW_S."""
+    det = MarkerDetector(Camera.default(), DetectorConfig(skin_adapt_frames=0))
+    offsets = ((0, 0), (0, 30), (25, 55))
+    frame = np.zeros((480, 640, 3), np.uint8)
+    frame[:] = (60, 70, 80)
+    for k in range(3):
+        img, _ = swept_disc((30.0, 50.0), (30.4, 50.0), seed=k, offsets=offsets)
+        frame[200:360, 200:400] = img
+        d = det.detect(frame, None, k / 30)
+        det.marker_bgr, det.skin_bgr = MARKER, SKIN  # as learn_markers would measure them
+    assert d.count == 3 and not any(b.suspect for b in det.last_blobs)
+    shaded, mid = shaded_markers(seed=5, offsets=offsets)
+    frame[200:360, 200:400] = shaded
+    truth = mid + np.array(offsets) + (200, 200)
+    colour_only = MarkerDetector(Camera.default(), DetectorConfig(skin_adapt_frames=0))
+    assert colour_only.detect(frame, None, 0.0).count == 0
+    for k in range(3, 6):  # the window stays although the frame before had no colour blob
+        d = det.detect(frame, None, k / 30)
+        assert d.count == 3 and all(b.reason == "shade" for b in det.last_blobs)
+        err = np.linalg.norm(truth[:, None] - d.uv[None], axis=2).min(1)
+        assert np.all(err < 0.3), err
+    blank = np.clip(np.random.default_rng(2).normal(SHADE * SKIN_SHADE, 2.0, (160, 200, 3)), 0,
+                    255).astype(np.uint8)
+    frame[200:360, 200:400] = blank  # the markers gone from view: no window is made
+    assert det.detect(frame, None, 6 / 30).count == 0
+    frame[200:360, 200:400] = shaded
+    assert det.detect(frame, None, 5 / 30 + 0.6).count == 0  # the last window has expired

@@ -57,9 +57,14 @@ from wristtrack.detect.learning import MarkerLearning
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.paper import paper_blobs
 from wristtrack.detect.skin import SkinModel, SkinRegion
-from wristtrack.detect.streaks import MAX_STREAK_RATIO, find_streaks
+from wristtrack.detect.streaks import MAX_STREAK_RATIO, STREAK_RATIO, find_chroma_blobs
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import MARKER_NAMES
+
+# Markers lost to the shade or to blur are searched for by chromaticity in the last tracking
+# window for this long, and wherever a frame has fewer blobs than the most of this many frames.
+RECENT_WINDOW_S = 0.5
+RECENT_FRAMES = 15
 
 
 @dataclass(frozen=True)
@@ -69,8 +74,9 @@ class Blob:
     ``suspect`` marks a measurement not to take at face value; ``reason`` says why: "split"
     (one of two markers cut from a merged blob), "elongated" (too long for one marker, no waist
     to cut: blur or a merged pair), "clipped" (lopsided: partly hidden), "border" (touches the
-    image border). ``expected_diameter`` is the unforeshortened marker diameter at the blob's
-    depth (px), NaN when unknown.
+    image border), "streak" (smeared by motion) or "shade" (too dark for the colour reference;
+    both found by chromaticity, detect/streaks.py). ``expected_diameter`` is the
+    unforeshortened marker diameter at the blob's depth (px), NaN when unknown.
     """
 
     uv: tuple[float, float]
@@ -133,6 +139,8 @@ class MarkerDetector(MarkerLearning):
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
         self.blob_size = BlobSize()  # the blobs' typical length on the expected one, learned
+        self._window: tuple[tuple[int, int, int, int], float] | None = None  # (box, timestamp)
+        self._counts: list[int] = []  # blobs found in each of the last RECENT_FRAMES frames
 
     @property
     def reference(self) -> np.ndarray:
@@ -200,10 +208,14 @@ class MarkerDetector(MarkerLearning):
                 more = self._search(bgr, half, depth, whole, wide=True)
                 if len(more) > len(blobs):
                     blobs, self.last_region = more, whole
-        if near is not None and self._short(blobs):
-            blobs = blobs + self._streaks(bgr, depth, near, blobs)
+        if near is not None:
+            self._window = (near, timestamp)
+        window = self._recent_window(timestamp)
+        if window is not None and len(blobs) < self._markers_seen():
+            blobs = blobs + self._chroma_blobs(bgr, depth, window, blobs)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
+        self._counts = (self._counts + [len(blobs)])[-RECENT_FRAMES:]
         # the blobs as long as any (a minority of merged pairs leaves the median), not those
         # whose shape is cut (clipped, split, on the border) or smeared (a streak)
         self.blob_size.learn([(b.major, b.expected_diameter) for b in blobs
@@ -244,9 +256,10 @@ class MarkerDetector(MarkerLearning):
                      expected_diameter=math.nan)
                 for uv_, k in zip(uv, np.flatnonzero(keep).tolist(), strict=True)]
 
-    def _streaks(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
-        """Motion-blurred markers in the tracking window ``box`` that the colour search missed
-        (detect/streaks.py), as suspect blobs (reason "streak"); none before learning."""
+    def _chroma_blobs(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
+        """Markers in the tracking window ``box`` that the colour search missed, found by
+        chromaticity (detect/streaks.py): motion-blurred ones (reason "streak") and ones in the
+        shade (reason "shade"), suspect blobs both; none before learning."""
         d = self._last_diameter
         if self.marker_bgr is None or self.skin_bgr is None or not d > 0:
             return []
@@ -257,15 +270,29 @@ class MarkerDetector(MarkerLearning):
         H, W = bgr.shape[:2]
         box = (max(box[0] - grow, 0), max(box[1] - grow, 0), min(box[2] + grow, W),
                min(box[3] + grow, H))
-        for u, v, z, length, width, angle in find_streaks(bgr, depth, box, self.marker_bgr,
-                                                          self.skin_bgr, d):
+        for u, v, z, length, width, angle in find_chroma_blobs(bgr, depth, box, self.marker_bgr,
+                                                               self.skin_bgr, d):
             if any(math.hypot(u - a, v - b) < d for a, b in found):
                 continue  # the colour search has this one
             out.append(Blob(uv=(u, v), area=math.pi / 4 * d * d,
                             depth=z * self.camera.depth_scale, similarity=0.0, major=length,
                             minor=width, angle=angle, skew=0.0, expected_diameter=d,
-                            suspect=True, reason="streak"))
+                            suspect=True,
+                            reason="streak" if length >= STREAK_RATIO * d else "shade"))
         return out
+
+    def _recent_window(self, timestamp: float) -> tuple[int, int, int, int] | None:
+        """The last tracking window (``_near_last_blobs``) if it is at most RECENT_WINDOW_S
+        old: markers lost in the shade or to blur leave the window without the blobs that made
+        it, while the hand is still where it was."""
+        if self._window is None or not timestamp - self._window[1] <= RECENT_WINDOW_S:
+            return None
+        return self._window[0]
+
+    def _markers_seen(self) -> int:
+        """The most blobs (at most six) of the last RECENT_FRAMES frames: a frame with fewer may
+        have missed some."""
+        return min(max(self._counts, default=0), len(MARKER_NAMES))
 
     def _near_last_blobs(self, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
         """The window around where the markers should be (box (x0, y0, x1, y1), corners on

@@ -1,4 +1,5 @@
-"""Motion-blurred markers: streaks found by chromaticity where the markers should be.
+"""Markers the colour reference misses, found by chromaticity where the markers should be:
+streaks of motion blur, and markers in the shade.
 
 A marker moving at 1-1.5 m/s, 0.6 m away, under a 1/60-1/30 s shutter smears into a streak
 40-50 px long and one marker wide. Each pixel of the streak saw the marker for only a fraction
@@ -13,6 +14,13 @@ streaks when their width fits one marker diameter (the blur does not widen a str
 motion) and their length at most MAX_STREAK_RATIO diameters. The t-weighted centroid of a
 streak is the marker's centre at mid-exposure, the frame's timestamp: the same quantity a
 sharp blob gives, with the streak's length along its direction as extra uncertainty.
+
+A marker in the lamp's shade (a hand turned away from it: ulnar deviation with supination at
+extension) is lit by the ambient light alone, a third of full light. Its pixels are dark enough
+that the codec's and the demosaicing's chroma errors, absolute in size, take most of its
+saturation (0.3-0.5 where lit markers show 0.8; value 40-60 of 255) and drift its hue toward
+the skin's: the hue-saturation reference rejects it. Its chromaticity still lies well along the
+skin-to-marker segment (t 0.3-0.5), so the same search finds it, as a blob one marker long.
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ from wristtrack.detect.blobs import shapes, trimmed_depth
 
 MIN_FRACTION = 0.12  # a pixel is part of a streak when the marker covered it this long
 MAX_STREAK_RATIO = 8.0  # streak length / marker diameter above: not one marker
+STREAK_RATIO = 1.3  # length / marker diameter above: a streak (below: one sharp marker)
 WIDTH_RATIO = (0.5, 1.8)  # streak width / marker diameter (the PSF and edge mixing widen it)
 MIN_MASS = 0.5  # streak mass (sum of t) / marker disc area below: too faint to trust
 GROW_PX = 3  # the thresholded streak is grown by this to take in its faint ends
@@ -35,7 +44,7 @@ def chromaticity(bgr: np.ndarray) -> np.ndarray:
     return c / np.maximum(c.sum(axis=-1, keepdims=True), 1.0)
 
 
-def find_streaks(
+def find_chroma_blobs(
     bgr: np.ndarray,
     depth: np.ndarray | None,
     box: tuple[int, int, int, int],
@@ -43,9 +52,10 @@ def find_streaks(
     skin_bgr: np.ndarray,
     diameter_px: float,
 ) -> list[tuple[float, float, float, float, float, float]]:
-    """Streaks of one marker diameter ``diameter_px`` in the window ``box`` (x0, y0, x1, y1) of
-    ``bgr``: (u, v, depth in the depth image's units (NaN if none), length px, width px,
-    direction rad) each. ``marker_bgr`` and ``skin_bgr`` are the two colours mixed."""
+    """Blobs of marker chromaticity one marker diameter ``diameter_px`` wide in the window
+    ``box`` (x0, y0, x1, y1) of ``bgr``, streaks (longer than STREAK_RATIO diameters) or not:
+    (u, v, depth in the depth image's units (NaN if none), length px, width px, direction rad)
+    each. ``marker_bgr`` and ``skin_bgr`` are the two colours mixed."""
     x0, y0, x1, y1 = box
     win = bgr[y0:y1, x0:x1]
     cs, cm = chromaticity(skin_bgr), chromaticity(marker_bgr)
@@ -54,8 +64,15 @@ def find_streaks(
     if norm2 < 1e-6 or not diameter_px > 0:
         return []
     t = (chromaticity(win) - cs) @ (axis / norm2)
+    # Above the skin around: the median over four marker diameters is the skin under a marker
+    # or a streak (they cover a minority of it), so the hand's shaded side, whose chromaticity
+    # has drifted toward the marker's (t 0.1-0.2), does not pass for one large blob. (In
+    # uint8 steps of 1/64: OpenCV's median of a wide window takes 8-bit images only.)
+    wide = 4 * int(diameter_px) + 1
+    skin = cv2.medianBlur(np.clip(np.round((t + 1.0) * 64.0), 0, 255).astype(np.uint8), wide)
+    t_skin = skin.astype(np.float32) / 64.0 - 1.0
     n, labels, stats, _ = cv2.connectedComponentsWithStats(
-        (t > MIN_FRACTION).astype(np.uint8), connectivity=8)
+        (t - t_skin > MIN_FRACTION).astype(np.uint8), connectivity=8)
     out = []
     disc = np.pi / 4 * diameter_px**2
     g = GROW_PX
@@ -68,11 +85,15 @@ def find_streaks(
             continue  # cut by the window: its centre cannot be trusted
         # the component grown by a few pixels: a streak's faint ends (each end pixel saw the
         # marker briefly) lie below the threshold; weights unclipped, so the skin's noise
-        # around it averages out instead of pulling the centre
-        gx0, gy0 = max(bx - g, 0), max(by - g, 0)
-        sl = (slice(gy0, by + bh + g), slice(gx0, bx + bw + g))
+        # around it averages out instead of pulling the centre. They are taken above the skin
+        # around it (the median of a ring as wide again, off other components): in the shade
+        # the skin is not quite the colour learned under the lamp (t -0.1 or so).
+        gx0, gy0 = max(bx - 2 * g, 0), max(by - 2 * g, 0)
+        sl = (slice(gy0, by + bh + 2 * g), slice(gx0, bx + bw + 2 * g))
         mask = cv2.dilate((labels[sl] == k).astype(np.uint8), grow) > 0
-        w = np.where(mask, t[sl], 0.0)
+        ring = (cv2.dilate(mask.astype(np.uint8), grow) > 0) & ~mask & (labels[sl] == 0)
+        base = float(np.median(t[sl][ring])) if ring.any() else 0.0
+        w = np.where(mask, t[sl] - base, 0.0)
         if w.sum() < MIN_MASS * disc * 0.5:
             continue
         bx, by = gx0, gy0
@@ -80,8 +101,8 @@ def find_streaks(
         width, length = float(sh.minor[0]), float(sh.major[0])
         if not (WIDTH_RATIO[0] * diameter_px <= width <= WIDTH_RATIO[1] * diameter_px):
             continue
-        if length > MAX_STREAK_RATIO * diameter_px or length < 1.3 * diameter_px:
-            continue  # a sharp blob is the colour detector's; a longer one is not one marker
+        if length > MAX_STREAK_RATIO * diameter_px:
+            continue  # not one marker
         z = np.nan
         if depth is not None:
             z = float(trimmed_depth(depth[y0:y1, x0:x1][sl][None], (w > 0.3)[None],
