@@ -278,7 +278,11 @@ def robustness_sections(
         f"{list(seeds)}) with each "
         "simulator effect alone at its realistic strength (`wristtrack.sim.realism`: numbers "
         "from real devices and the literature), then all of them combined (`simulate --preset "
-        "real`), for both hands and without hand.json. The detector runs as `track` runs it; "
+        "real`), for both hands and without hand.json. Both hands go through the same "
+        "rotations in the camera's frame, so each makes its own signs of deviation and "
+        "pronation; 'mirrored movement' is a right hand making the left hand's (ulnar deviation "
+        "with supination at extension), which turns the back of the hand from the lamp "
+        "(`sim.scenes.mirrored`). The detector runs as `track` runs it; "
         "every tracker gets the same blobs. Recall: markers used with their right label (blob "
         f"within {USED_PX:g} px of the truth) / markers visible.",
         "",
