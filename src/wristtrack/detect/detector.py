@@ -57,12 +57,19 @@ from wristtrack.detect.learning import MarkerLearning
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.paper import paper_blobs
 from wristtrack.detect.skin import SkinModel, SkinRegion
-from wristtrack.detect.streaks import MAX_STREAK_RATIO, STREAK_RATIO, find_chroma_blobs
+from wristtrack.detect.streaks import (
+    MAX_STREAK_RATIO,
+    STREAK_RATIO,
+    find_chroma_blobs,
+    is_shaded_marker,
+)
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import MARKER_NAMES
 
-# Markers lost to the shade or to blur are searched for by chromaticity in the last tracking
-# window for this long, and wherever a frame has fewer blobs than the most of this many frames.
+# Markers lost to the shade are searched for by chromaticity in the last tracking window for
+# this long, wherever a frame has fewer blobs than the most of this many frames. (Streaks, where
+# it has fewer than the frame before, in the current window: a marker hidden for long, by an
+# occluder, would let its edges pass for one.)
 RECENT_WINDOW_S = 0.5
 RECENT_FRAMES = 15
 
@@ -211,8 +218,10 @@ class MarkerDetector(MarkerLearning):
         if near is not None:
             self._window = (near, timestamp)
         window = self._recent_window(timestamp)
+        if near is not None and self._short(blobs):
+            blobs = blobs + self._chroma_blobs(bgr, depth, near, blobs, shade=False)
         if window is not None and len(blobs) < self._markers_seen():
-            blobs = blobs + self._chroma_blobs(bgr, depth, window, blobs)
+            blobs = blobs + self._chroma_blobs(bgr, depth, window, blobs, shade=True)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
         self._counts = (self._counts + [len(blobs)])[-RECENT_FRAMES:]
@@ -256,10 +265,11 @@ class MarkerDetector(MarkerLearning):
                      expected_diameter=math.nan)
                 for uv_, k in zip(uv, np.flatnonzero(keep).tolist(), strict=True)]
 
-    def _chroma_blobs(self, bgr, depth, box, blobs: list[Blob]) -> list[Blob]:
+    def _chroma_blobs(self, bgr, depth, box, blobs: list[Blob], shade: bool) -> list[Blob]:
         """Markers in the tracking window ``box`` that the colour search missed, found by
-        chromaticity (detect/streaks.py): motion-blurred ones (reason "streak") and ones in the
-        shade (reason "shade"), suspect blobs both; none before learning."""
+        chromaticity (detect/streaks.py): motion-blurred ones (reason "streak") or, with
+        ``shade``, ones in the shade (reason "shade"), suspect blobs both; none before
+        learning."""
         d = self._last_diameter
         if self.marker_bgr is None or self.skin_bgr is None or not d > 0:
             return []
@@ -270,15 +280,19 @@ class MarkerDetector(MarkerLearning):
         H, W = bgr.shape[:2]
         box = (max(box[0] - grow, 0), max(box[1] - grow, 0), min(box[2] + grow, W),
                min(box[3] + grow, H))
-        for u, v, z, length, width, angle in find_chroma_blobs(bgr, depth, box, self.marker_bgr,
-                                                               self.skin_bgr, d):
-            if any(math.hypot(u - a, v - b) < d for a, b in found):
+        for c in find_chroma_blobs(bgr, depth, box, self.marker_bgr, self.skin_bgr, d,
+                                   skin_around=shade):
+            if any(math.hypot(c.u - a, c.v - b) < d for a, b in found):
                 continue  # the colour search has this one
-            out.append(Blob(uv=(u, v), area=math.pi / 4 * d * d,
-                            depth=z * self.camera.depth_scale, similarity=0.0, major=length,
-                            minor=width, angle=angle, skew=0.0, expected_diameter=d,
-                            suspect=True,
-                            reason="streak" if length >= STREAK_RATIO * d else "shade"))
+            if shade and not is_shaded_marker(c, d):
+                continue
+            if not shade and c.length < STREAK_RATIO * d:
+                continue  # a sharp blob is the colour search's
+            out.append(Blob(uv=(c.u, c.v), area=math.pi / 4 * d * d,
+                            depth=c.depth * self.camera.depth_scale, similarity=0.0,
+                            major=c.length, minor=c.width, angle=c.angle, skew=0.0,
+                            expected_diameter=d, suspect=True,
+                            reason="shade" if shade else "streak"))
         return out
 
     def _recent_window(self, timestamp: float) -> tuple[int, int, int, int] | None:

@@ -20,10 +20,16 @@ extension) is lit by the ambient light alone, a third of full light. Its pixels 
 that the codec's and the demosaicing's chroma errors, absolute in size, take most of its
 saturation (0.3-0.5 where lit markers show 0.8; value 40-60 of 255) and drift its hue toward
 the skin's: the hue-saturation reference rejects it. Its chromaticity still lies well along the
-skin-to-marker segment (t 0.3-0.5), so the same search finds it, as a blob one marker long.
+skin-to-marker segment (t 0.3-0.6), but the shaded skin's has drifted a little too (t -0.1 to
+0.2 from the skin learned under the lamp). So there t is taken above the skin around each
+pixel (``skin_around``), and a blob one marker long standing SHADE_CONTRAST above the skin
+around it is a marker in the shade (:func:`is_shaded_marker`); a grey edge, an occluder's mixed
+with the skin, stands a third as far.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -33,9 +39,31 @@ from wristtrack.detect.blobs import shapes, trimmed_depth
 MIN_FRACTION = 0.12  # a pixel is part of a streak when the marker covered it this long
 MAX_STREAK_RATIO = 8.0  # streak length / marker diameter above: not one marker
 STREAK_RATIO = 1.3  # length / marker diameter above: a streak (below: one sharp marker)
+# A marker in the shade (is_shaded_marker): at most this long (diameters; the grown weights
+# make a round marker 1.0-1.45 diameters) and this far along the marker's chromaticity above
+# the skin around it.
+SHADE_MAX_LENGTH = 1.6
+SHADE_CONTRAST = 0.4
+# A shaded marker's weights gather at its core (its fringe is the skin's colour): its width
+# measures 0.55-0.8 diameters, and less seen obliquely.
+SHADE_MIN_WIDTH = 0.35
 WIDTH_RATIO = (0.5, 1.8)  # streak width / marker diameter (the PSF and edge mixing widen it)
 MIN_MASS = 0.5  # streak mass (sum of t) / marker disc area below: too faint to trust
 GROW_PX = 3  # the thresholded streak is grown by this to take in its faint ends
+
+
+class ChromaBlob(NamedTuple):
+    """A blob of marker chromaticity: centre (u, v) px, depth in the depth image's units (NaN
+    if none), length and width px, direction rad; ``contrast`` its peak t above the skin around
+    it."""
+
+    u: float
+    v: float
+    depth: float
+    length: float
+    width: float
+    angle: float
+    contrast: float
 
 
 def chromaticity(bgr: np.ndarray) -> np.ndarray:
@@ -51,11 +79,13 @@ def find_chroma_blobs(
     marker_bgr: np.ndarray,
     skin_bgr: np.ndarray,
     diameter_px: float,
-) -> list[tuple[float, float, float, float, float, float]]:
+    skin_around: bool = False,
+) -> list[ChromaBlob]:
     """Blobs of marker chromaticity one marker diameter ``diameter_px`` wide in the window
-    ``box`` (x0, y0, x1, y1) of ``bgr``, streaks (longer than STREAK_RATIO diameters) or not:
-    (u, v, depth in the depth image's units (NaN if none), length px, width px, direction rad)
-    each. ``marker_bgr`` and ``skin_bgr`` are the two colours mixed."""
+    ``box`` (x0, y0, x1, y1) of ``bgr``, streaks (longer than STREAK_RATIO diameters) or not
+    (:func:`is_shaded_marker` tells a marker in the shade). ``marker_bgr`` and ``skin_bgr`` are
+    the two colours mixed. ``skin_around``: each pixel's t taken above the skin around it, not
+    above ``skin_bgr`` (for the shade: see below)."""
     x0, y0, x1, y1 = box
     win = bgr[y0:y1, x0:x1]
     cs, cm = chromaticity(skin_bgr), chromaticity(marker_bgr)
@@ -64,15 +94,18 @@ def find_chroma_blobs(
     if norm2 < 1e-6 or not diameter_px > 0:
         return []
     t = (chromaticity(win) - cs) @ (axis / norm2)
-    # Above the skin around: the median over four marker diameters is the skin under a marker
-    # or a streak (they cover a minority of it), so the hand's shaded side, whose chromaticity
-    # has drifted toward the marker's (t 0.1-0.2), does not pass for one large blob. (In
-    # uint8 steps of 1/64: OpenCV's median of a wide window takes 8-bit images only.)
-    wide = 4 * int(diameter_px) + 1
-    skin = cv2.medianBlur(np.clip(np.round((t + 1.0) * 64.0), 0, 255).astype(np.uint8), wide)
-    t_skin = skin.astype(np.float32) / 64.0 - 1.0
+    if skin_around:
+        # The median over four marker diameters is the skin under a marker (markers cover a
+        # minority of it), so the hand's shaded side, whose chromaticity has drifted toward
+        # the marker's (t 0.1-0.2), does not pass for one large blob. (In uint8 steps of 1/64:
+        # OpenCV's median of a wide window takes 8-bit images only.)
+        wide = 4 * int(diameter_px) + 1
+        skin = cv2.medianBlur(np.clip(np.round((t + 1.0) * 64.0), 0, 255).astype(np.uint8),
+                              wide)
+        t = t - (skin.astype(np.float32) / 64.0 - 1.0)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(
-        (t - t_skin > MIN_FRACTION).astype(np.uint8), connectivity=8)
+        (t > MIN_FRACTION).astype(np.uint8), connectivity=8)
+    narrowest = SHADE_MIN_WIDTH if skin_around else WIDTH_RATIO[0]
     out = []
     disc = np.pi / 4 * diameter_px**2
     g = GROW_PX
@@ -85,21 +118,23 @@ def find_chroma_blobs(
             continue  # cut by the window: its centre cannot be trusted
         # the component grown by a few pixels: a streak's faint ends (each end pixel saw the
         # marker briefly) lie below the threshold; weights unclipped, so the skin's noise
-        # around it averages out instead of pulling the centre. They are taken above the skin
-        # around it (the median of a ring as wide again, off other components): in the shade
-        # the skin is not quite the colour learned under the lamp (t -0.1 or so).
+        # around it averages out instead of pulling the centre. The ring beyond (as wide again,
+        # off other components) is the skin the blob's contrast is taken against, and with
+        # ``skin_around`` its weights: the skin right around a marker in the shade is not
+        # the median over four diameters (a few hundredths either way, which over the grown
+        # support weigh as much as the marker's core).
         gx0, gy0 = max(bx - 2 * g, 0), max(by - 2 * g, 0)
         sl = (slice(gy0, by + bh + 2 * g), slice(gx0, bx + bw + 2 * g))
         mask = cv2.dilate((labels[sl] == k).astype(np.uint8), grow) > 0
         ring = (cv2.dilate(mask.astype(np.uint8), grow) > 0) & ~mask & (labels[sl] == 0)
         base = float(np.median(t[sl][ring])) if ring.any() else 0.0
-        w = np.where(mask, t[sl] - base, 0.0)
+        w = np.where(mask, t[sl] - (base if skin_around else 0.0), 0.0)
         if w.sum() < MIN_MASS * disc * 0.5:
             continue
         bx, by = gx0, gy0
         sh = shapes(w[None].astype(np.float64))
         width, length = float(sh.minor[0]), float(sh.major[0])
-        if not (WIDTH_RATIO[0] * diameter_px <= width <= WIDTH_RATIO[1] * diameter_px):
+        if not (narrowest * diameter_px <= width <= WIDTH_RATIO[1] * diameter_px):
             continue
         if length > MAX_STREAK_RATIO * diameter_px:
             continue  # not one marker
@@ -107,6 +142,14 @@ def find_chroma_blobs(
         if depth is not None:
             z = float(trimmed_depth(depth[y0:y1, x0:x1][sl][None], (w > 0.3)[None],
                                     (0.2, 0.8))[0])
-        out.append((x0 + bx + float(sh.cx[0]), y0 + by + float(sh.cy[0]), z, length, width,
-                    float(sh.angle[0])))
+        out.append(ChromaBlob(x0 + bx + float(sh.cx[0]), y0 + by + float(sh.cy[0]), z, length,
+                              width, float(sh.angle[0]), float(t[sl][mask].max()) - base))
     return out
+
+
+def is_shaded_marker(blob: ChromaBlob, diameter_px: float) -> bool:
+    """Whether ``blob`` is one marker in the shade, not a fringe of skin or an edge: one marker
+    long and well along the marker's chromaticity above the skin around it (rendered: shaded
+    markers 0.5-1.0; the edge of a dark pen over the skin, mixed with it, 0.25-0.33; the
+    background 0.16-0.21)."""
+    return blob.length < SHADE_MAX_LENGTH * diameter_px and blob.contrast >= SHADE_CONTRAST
