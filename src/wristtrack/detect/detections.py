@@ -20,8 +20,8 @@ class Detections:
     (registered to colour, camera.depth_scale units), where the detector had one: the tracker
     reads the skin between the markers in it (tracking/surface.py). ``suspect`` (M,) marks the
     blobs whose centre the detector doubts (``Blob.suspect``: clipped, split, elongated, on the
-    border, a streak), or is None: none doubted. The tracker takes a suspect centre at the
-    model's pixel noise, never at the lower noise it learns from the other blobs.
+    border, a streak, in the shade), or is None: none doubted. The tracker takes a suspect
+    centre at the model's pixel noise, never at the lower noise it learns from the other blobs.
     """
 
     timestamp: float
@@ -64,3 +64,28 @@ class Detections:
     @property
     def count(self) -> int:
         return int(self.uv.shape[0])
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One detected blob (full details; ``Detections`` carries its uv, depth and suspect flag).
+
+    ``suspect`` marks a measurement not to take at face value; ``reason`` says why: "split"
+    (one of two markers cut from a merged blob), "elongated" (too long for one marker, no waist
+    to cut: blur or a merged pair), "clipped" (lopsided: partly hidden), "border" (touches the
+    image border), "streak" (smeared by motion) or "shade" (too dark for the colour reference;
+    both found by chromaticity, detect/streaks.py). ``expected_diameter`` is the
+    unforeshortened marker diameter at the blob's depth (px), NaN when unknown.
+    """
+
+    uv: tuple[float, float]
+    area: float  # px, coverage-weighted
+    depth: float  # metres, NaN if no valid depth or no depth image
+    similarity: float  # Bhattacharyya coefficient with the reference histogram, 0..1
+    major: float  # px, full axes of the moment-equivalent ellipse
+    minor: float
+    angle: float  # rad, major-axis direction
+    skew: float
+    expected_diameter: float
+    suspect: bool = False
+    reason: str = ""

@@ -52,51 +52,14 @@ from wristtrack.detect.blobs import (
 )
 from wristtrack.detect.colour import back_project, gaussian_reference
 from wristtrack.detect.config import PRESETS, DetectorConfig
-from wristtrack.detect.detections import Detections
+from wristtrack.detect.detections import Blob, Detections
 from wristtrack.detect.learning import MarkerLearning
 from wristtrack.detect.marker_colour import MarkerColour
 from wristtrack.detect.paper import paper_blobs
 from wristtrack.detect.skin import SkinModel, SkinRegion
-from wristtrack.detect.streaks import (
-    MAX_STREAK_RATIO,
-    STREAK_RATIO,
-    find_chroma_blobs,
-    is_shaded_marker,
-)
+from wristtrack.detect.tracking_window import TrackingWindow
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import MARKER_NAMES
-
-# Markers lost to the shade are searched for by chromaticity in the last tracking window for
-# this long, wherever a frame has fewer blobs than the most of this many frames. (Streaks, where
-# it has fewer than the frame before, in the current window: a marker hidden for long, by an
-# occluder, would let its edges pass for one.)
-RECENT_WINDOW_S = 0.5
-RECENT_FRAMES = 15
-
-
-@dataclass(frozen=True)
-class Blob:
-    """One detected blob (full details; ``Detections`` carries its uv, depth and suspect flag).
-
-    ``suspect`` marks a measurement not to take at face value; ``reason`` says why: "split"
-    (one of two markers cut from a merged blob), "elongated" (too long for one marker, no waist
-    to cut: blur or a merged pair), "clipped" (lopsided: partly hidden), "border" (touches the
-    image border), "streak" (smeared by motion) or "shade" (too dark for the colour reference;
-    both found by chromaticity, detect/streaks.py). ``expected_diameter`` is the
-    unforeshortened marker diameter at the blob's depth (px), NaN when unknown.
-    """
-
-    uv: tuple[float, float]
-    area: float  # px, coverage-weighted
-    depth: float  # metres, NaN if no valid depth or no depth image
-    similarity: float  # Bhattacharyya coefficient with the reference histogram, 0..1
-    major: float  # px, full axes of the moment-equivalent ellipse
-    minor: float
-    angle: float  # rad, major-axis direction
-    skew: float
-    expected_diameter: float
-    suspect: bool = False
-    reason: str = ""
 
 
 @dataclass
@@ -112,7 +75,7 @@ class _Stack:
     z: np.ndarray | None = None  # (n,) metres
 
 
-class MarkerDetector(MarkerLearning):
+class MarkerDetector(MarkerLearning, TrackingWindow):
     """Blue-marker detector for one camera; keeps the adapted colour models between frames."""
 
     def __init__(self, camera: Camera, config: DetectorConfig | None = None) -> None:
@@ -146,8 +109,8 @@ class MarkerDetector(MarkerLearning):
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
         self.blob_size = BlobSize()  # the blobs' typical length on the expected one, learned
-        self._window: tuple[tuple[int, int, int, int], float] | None = None  # (box, timestamp)
-        self._counts: list[int] = []  # blobs found in each of the last RECENT_FRAMES frames
+        self._window: tuple[tuple[int, int, int, int], float] | None = None  # TrackingWindow's
+        self._counts: list[int] = []
 
     @property
     def reference(self) -> np.ndarray:
@@ -215,16 +178,10 @@ class MarkerDetector(MarkerLearning):
                 more = self._search(bgr, half, depth, whole, wide=True)
                 if len(more) > len(blobs):
                     blobs, self.last_region = more, whole
-        if near is not None:
-            self._window = (near, timestamp)
-        window = self._recent_window(timestamp)
-        if near is not None and self._short(blobs):
-            blobs = blobs + self._chroma_blobs(bgr, depth, near, blobs, shade=False)
-        if window is not None and len(blobs) < self._markers_seen():
-            blobs = blobs + self._chroma_blobs(bgr, depth, window, blobs, shade=True)
+        blobs = blobs + self._missed_markers(bgr, depth, near, blobs, timestamp)
         self._prev_uv = np.array([b.uv for b in self.last_blobs]).reshape(-1, 2)
         self.last_blobs = blobs
-        self._counts = (self._counts + [len(blobs)])[-RECENT_FRAMES:]
+        self._count(blobs)
         # the blobs as long as any (a minority of merged pairs leaves the median), not those
         # whose shape is cut (clipped, split, on the border) or smeared (a streak)
         self.blob_size.learn([(b.major, b.expected_diameter) for b in blobs
@@ -264,77 +221,6 @@ class MarkerDetector(MarkerLearning):
                      angle=float(sh.angle[k]), skew=float(sh.skew[k]),
                      expected_diameter=math.nan)
                 for uv_, k in zip(uv, np.flatnonzero(keep).tolist(), strict=True)]
-
-    def _chroma_blobs(self, bgr, depth, box, blobs: list[Blob], shade: bool) -> list[Blob]:
-        """Markers in the tracking window ``box`` that the colour search missed, found by
-        chromaticity (detect/streaks.py): motion-blurred ones (reason "streak") or, with
-        ``shade``, ones in the shade (reason "shade"), suspect blobs both; none before
-        learning."""
-        d = self._last_diameter
-        if self.marker_bgr is None or self.skin_bgr is None or not d > 0:
-            return []
-        found = [b.uv for b in blobs]
-        out = []
-        # a streak reaches up to MAX_STREAK_RATIO / 2 diameters beyond where its marker is
-        grow = int(MAX_STREAK_RATIO * d / 2) + 1
-        H, W = bgr.shape[:2]
-        box = (max(box[0] - grow, 0), max(box[1] - grow, 0), min(box[2] + grow, W),
-               min(box[3] + grow, H))
-        for c in find_chroma_blobs(bgr, depth, box, self.marker_bgr, self.skin_bgr, d,
-                                   skin_around=shade):
-            if any(math.hypot(c.u - a, c.v - b) < d for a, b in found):
-                continue  # the colour search has this one
-            if shade and not is_shaded_marker(c, d):
-                continue
-            if not shade and c.length < STREAK_RATIO * d:
-                continue  # a sharp blob is the colour search's
-            out.append(Blob(uv=(c.u, c.v), area=math.pi / 4 * d * d,
-                            depth=c.depth * self.camera.depth_scale, similarity=0.0,
-                            major=c.length, minor=c.width, angle=c.angle, skew=0.0,
-                            expected_diameter=d, suspect=True,
-                            reason="shade" if shade else "streak"))
-        return out
-
-    def _recent_window(self, timestamp: float) -> tuple[int, int, int, int] | None:
-        """The last tracking window (``_near_last_blobs``) if it is at most RECENT_WINDOW_S
-        old: markers lost in the shade or to blur leave the window without the blobs that made
-        it, while the hand is still where it was."""
-        if self._window is None or not 0.0 <= timestamp - self._window[1] <= RECENT_WINDOW_S:
-            return None
-        return self._window[0]
-
-    def _markers_seen(self) -> int:
-        """The most blobs (at most six) of the last RECENT_FRAMES frames: a frame with fewer may
-        have missed some."""
-        return min(max(self._counts, default=0), len(MARKER_NAMES))
-
-    def _near_last_blobs(self, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
-        """The window around where the markers should be (box (x0, y0, x1, y1), corners on
-        multiples of the skin downsampling): the last frame's blobs, each moved on by its own
-        motion since the frame before (matched by nearness), plus a margin. None to search the
-        whole frame: fewer than 3 blobs last frame, the skin model still gathering its first
-        frames, or tracking off. The caller searches the whole frame again whenever the window
-        gives fewer blobs than the last frame had."""
-        cfg = self.config
-        if (not cfg.track_roi or len(self.last_blobs) < 3
-                or not (self.skin.adapted or cfg.skin_adapt_frames <= 0)):
-            return None
-        uv = np.array([b.uv for b in self.last_blobs])
-        if self._prev_uv is not None and len(self._prev_uv):
-            d = np.linalg.norm(uv[:, None] - self._prev_uv[None], axis=2)
-            step = uv - self._prev_uv[d.argmin(1)]
-            moved = d.min(1) < cfg.track_margin_px  # the same blob one frame earlier
-            uv = np.concatenate((uv, uv[moved] + step[moved]))
-        lo, hi = uv.min(0), uv.max(0)
-        m = max(cfg.track_margin_px, cfg.track_margin_ratio * float((hi - lo).max()))
-        s = cfg.skin_downsample
-        H, W = shape
-        x0, y0 = max(int(lo[0] - m) // s * s, 0), max(int(lo[1] - m) // s * s, 0)
-        x1 = min(-(-int(hi[0] + m + 1) // s) * s, W // s * s)
-        y1 = min(-(-int(hi[1] + m + 1) // s) * s, H // s * s)
-        if x1 - x0 < 16 or y1 - y0 < 16:
-            return None
-        return x0, y0, x1, y1
 
     def marker_mask(self, hsv: np.ndarray, wide: bool = False) -> np.ndarray:
         """uint8 0/255 mask of the pixels of an HSV image whose colour matches the reference
