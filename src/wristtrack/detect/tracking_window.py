@@ -3,8 +3,8 @@ the markers the colour search missed there, found by chromaticity (detect/streak
 of motion blur, and markers in the lamp's shade.
 
 Mixed into :class:`wristtrack.detect.detector.MarkerDetector`, whose ``config``, ``skin``,
-``camera``, ``last_blobs``, ``_prev_uv``, ``_last_diameter``, ``marker_bgr`` and ``skin_bgr``
-it reads; it keeps ``_window`` and ``_counts``.
+``camera``, ``last_blobs``, ``_prev_uv``, ``_last_diameter``, ``marker_bgr``, ``skin_bgr`` and
+``_short`` it uses; it keeps ``_window`` and ``_counts``.
 """
 
 from __future__ import annotations
