@@ -37,7 +37,8 @@ class TrackerConfig:
     nis_quantile: float = 0.999
     nis_lost_after: int = 5
     # Manoeuvres: a frame whose association fails (fewer than min_markers markers, or an
-    # update beyond the NIS quantile) although enough blobs are there is associated again with
+    # update beyond the NIS quantile) although enough undoubted blobs (min_markers, none
+    # suspect: Tracker._undoubted) are there is associated again with
     # the prior's velocity variances raised by (a dt)^2, (alpha dt)^2 for each (a m/s^2,
     # alpha rad/s^2) in turn: an unmodelled acceleration (a fast reach peaks at ~15 m/s^2).
     # A retry is kept only if its update is consistent. () = off (the paper's method).
