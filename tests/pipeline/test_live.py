@@ -266,3 +266,30 @@ def test_a_camera_that_stops_ends_the_session_with_its_reason(reach, tmp_path):
     assert live["frames"]["total"] == 8 == len(read_poses(tmp_path / "run" / "poses.csv")["frame"])
     with pytest.raises(InputError, match="device disconnected"):  # before any frame: an error
         track_live(Unplugged(reach, 0), tmp_path / "run0")
+
+
+def test_colours_learnt_in_the_background_are_all_handed_over(reach):
+    """The live loop learns the first fix's colours in a thread (BackgroundLearning) and hands
+    them to its detector: the hue-saturation models and the mean marker and skin colours the
+    searches for blurred and shaded markers need, the same as the offline run learns in place."""
+    from wristtrack.detect.detector import MarkerDetector
+    from wristtrack.pipeline.live.loop import BackgroundLearning
+    from wristtrack.pipeline.track import learn_colours
+    from wristtrack.tracking.tracker import Status, Tracker
+
+    with FolderRecording(reach) as rec:
+        frame = next(iter(rec.frames()))
+        camera, hand = rec.camera, rec.hand
+    offline = MarkerDetector(camera)
+    det = offline.detect(frame.bgr, frame.depth, frame.timestamp)
+    result = Tracker(camera, hand).step(det)
+    assert result.status == Status.TRACKING
+    learner = BackgroundLearning(camera, frame.bgr, det, result)
+    learner.join()
+    live = MarkerDetector(camera)
+    learner.apply_to(live)
+    learn_colours(offline, frame.bgr, det, result)
+    assert live.marker_bgr is not None and live.skin_bgr is not None
+    np.testing.assert_array_equal(live.marker_bgr, offline.marker_bgr)
+    np.testing.assert_array_equal(live.skin_bgr, offline.skin_bgr)
+    np.testing.assert_array_equal(live.reference, offline.reference)

@@ -238,8 +238,12 @@ class BackgroundLearning(threading.Thread):
             return
         self.applied = True
         if self._learning is not None:
-            detector.colour, detector.skin = self._learning.colour, self._learning.skin
-            detector.learned_count = self._learning.learned_count
+            learnt = self._learning
+            detector.colour, detector.skin = learnt.colour, learnt.skin
+            # the two colours a blurred or shaded marker's pixels are placed between
+            # (detect/streaks.py): without them the live detector never searched for either
+            detector.marker_bgr, detector.skin_bgr = learnt.marker_bgr, learnt.skin_bgr
+            detector.learned_count = learnt.learned_count
 
 
 def track_live(
