@@ -105,26 +105,34 @@ def test_a_grey_spot_over_the_skin_is_not_a_marker_in_the_shade():
     assert not is_shaded_marker(found[0], 10.0)
 
 
+def _tracked_sharp(step_px: float, interval_s: float):
+    """(detector, frame): the detector after tracking three sharp markers (OFFSETS) over three
+    frames ``interval_s`` apart, moving ``step_px`` a frame, given the colours learn_markers
+    would measure; the frame its last, markers on a patch of skin."""
+    # (no skin fit from this small synthetic patch of skin: the fixed skin box gates)
+    det = MarkerDetector(Camera.default(), DetectorConfig(skin_adapt_frames=0))
+    frame = np.zeros((480, 640, 3), np.uint8)
+    frame[:] = (60, 70, 80)
+    for k in range(3):
+        start = (30.0 + step_px * k, 50.0)
+        img, _ = swept_disc(start, (start[0] + 0.4, 50.0), seed=k, offsets=OFFSETS)
+        frame[200:360, 200:400] = img
+        d = det.detect(frame, None, k * interval_s)
+        det.marker_bgr, det.skin_bgr = MARKER, SKIN
+    assert d.count == 3 and not any(b.suspect for b in det.last_blobs)
+    return det, frame
+
+
 def test_detector_recovers_blurred_markers_while_tracking():
     """Three markers tracked sharp over three frames, then they smear (a 40 px sweep): the
     colour search misses the streaks, the streak search in the tracking window finds them, as
     suspect 'streak' blobs at the mid-exposure centres."""
-    # (no skin fit from this small synthetic patch of skin: the fixed skin box gates)
-    det = MarkerDetector(Camera.default(), DetectorConfig(skin_adapt_frames=0))
-    offsets = ((0, 0), (0, 30), (25, 55))
-    frame = np.zeros((480, 640, 3), np.uint8)
-    frame[:] = (60, 70, 80)
-    for k in range(3):
-        img, _ = swept_disc((30.0 + 5 * k, 50.0), (30.4 + 5 * k, 50.0), seed=k, offsets=offsets)
-        frame[200:360, 200:400] = img
-        d = det.detect(frame, None, float(k))
-        det.marker_bgr, det.skin_bgr = MARKER, SKIN  # as learn_markers would measure them
-    assert d.count == 3 and not any(b.suspect for b in det.last_blobs)
-    blurred, mid = swept_disc((57.0, 50.0), (97.0, 50.0), seed=9, offsets=offsets)
+    det, frame = _tracked_sharp(step_px=5.0, interval_s=1.0)
+    blurred, mid = swept_disc((57.0, 50.0), (97.0, 50.0), seed=9, offsets=OFFSETS)
     frame[200:360, 200:400] = blurred
     d = det.detect(frame, None, 3.0)
     assert d.count == 3 and all(b.reason == "streak" for b in det.last_blobs)
-    truth = mid + np.array(offsets) + (200, 200)
+    truth = mid + np.array(OFFSETS) + (200, 200)
     err = np.linalg.norm(truth[:, None] - d.uv[None], axis=2).min(1)
     assert np.all(err < 0.5), err
 
@@ -134,16 +142,7 @@ def test_detector_finds_markers_in_the_shade_while_tracking():
     desaturated, they fail the colour reference (no blob at all), and the search by
     chromaticity in the tracking window finds them as suspect 'shade' blobs at their centres.
     The window outlives the frames without blobs by RECENT_WINDOW_S."""
-    det = MarkerDetector(Camera.default(), DetectorConfig(skin_adapt_frames=0))
-    offsets = ((0, 0), (0, 30), (25, 55))
-    frame = np.zeros((480, 640, 3), np.uint8)
-    frame[:] = (60, 70, 80)
-    for k in range(3):
-        img, _ = swept_disc((30.0, 50.0), (30.4, 50.0), seed=k, offsets=offsets)
-        frame[200:360, 200:400] = img
-        d = det.detect(frame, None, k / 30)
-        det.marker_bgr, det.skin_bgr = MARKER, SKIN  # as learn_markers would measure them
-    assert d.count == 3 and not any(b.suspect for b in det.last_blobs)
+    det, frame = _tracked_sharp(step_px=0.0, interval_s=1 / 30)
     shaded, mid = shaded_markers(seed=5, drift=0.05)
     frame[:] = np.round(SHADE * SKIN).astype(np.uint8)  # the lamp's shade over everything
     frame[200:360, 200:400] = shaded

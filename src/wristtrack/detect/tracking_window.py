@@ -88,8 +88,8 @@ class TrackingWindow:
 
     def _recent_window(self, timestamp: float) -> tuple[int, int, int, int] | None:
         """The last tracking window (``_near_last_blobs``) if it is at most RECENT_WINDOW_S
-        old: markers lost in the shade or to blur leave the window without the blobs that made
-        it, while the hand is still where it was."""
+        old: markers lost in the shade leave the window without the blobs that made it, while
+        the hand is still where it was."""
         if self._window is None or not 0.0 <= timestamp - self._window[1] <= RECENT_WINDOW_S:
             return None
         return self._window[0]
