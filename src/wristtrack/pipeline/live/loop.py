@@ -238,12 +238,7 @@ class BackgroundLearning(threading.Thread):
             return
         self.applied = True
         if self._learning is not None:
-            learnt = self._learning
-            detector.colour, detector.skin = learnt.colour, learnt.skin
-            # the two colours a blurred or shaded marker's pixels are placed between
-            # (detect/streaks.py): without them the live detector never searched for either
-            detector.marker_bgr, detector.skin_bgr = learnt.marker_bgr, learnt.skin_bgr
-            detector.learned_count = learnt.learned_count
+            detector.take_learned(self._learning)
 
 
 def track_live(
