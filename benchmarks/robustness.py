@@ -47,8 +47,12 @@ CONDITIONS: dict[str, dict[str, Any]] = {
                                      "write_hand": False},
     # The rows above move both hands through the same rotations in the camera's frame, so each
     # hand makes its own signs of deviation and pronation. A right hand making the left hand's
-    # (ulnar deviation with supination) turns its back away from the lamp at the extremes.
+    # (ulnar deviation with supination) turns its back away from the lamp at the extremes; a
+    # left hand making the right hand's turns the thumb side edge-on to the camera there, where
+    # the sensor reads the markers on the silhouette in part.
     "all, right hand, mirrored movement": {"effects": list(PRESET_REAL), "mirror_movement": True},
+    "all, left hand, mirrored movement": {"effects": list(PRESET_REAL), "hand_side": "left",
+                                          "mirror_movement": True},
 }
 
 TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURACY_ROWS
@@ -280,9 +284,10 @@ def robustness_sections(
         "from real devices and the literature), then all of them combined (`simulate --preset "
         "real`), for both hands and without hand.json. Both hands go through the same "
         "rotations in the camera's frame, so each makes its own signs of deviation and "
-        "pronation; 'mirrored movement' is a right hand making the left hand's (ulnar deviation "
-        "with supination at extension), which turns the back of the hand from the lamp "
-        "(`sim.scenes.mirrored`). The detector runs as `track` runs it; "
+        "pronation; 'mirrored movement' is each hand making the other's: the right hand "
+        "ulnar deviation with supination at extension, which turns the back of the hand from "
+        "the lamp, the left hand radial deviation with pronation (`sim.scenes.mirrored`). "
+        "The detector runs as `track` runs it; "
         "every tracker gets the same blobs. Recall: markers used with their right label (blob "
         f"within {USED_PX:g} px of the truth) / markers visible.",
         "",
