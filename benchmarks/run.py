@@ -14,6 +14,7 @@ import argparse
 import contextlib
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -330,6 +331,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--print", action="store_true",
                         help="print the sections measured instead of writing --out")
+    parser.add_argument("--keep-renders", action="store_true",
+                        help="keep the rendered recordings in the render cache afterwards "
+                        "(~14 GB for a full run; every run renders afresh)")
     args = parser.parse_args(argv)
     unknown = [n for n in args.only if n not in SECTIONS]
     if unknown:
@@ -342,7 +346,24 @@ def main(argv: list[str] | None = None) -> int:
                   "overwritten under it); wait for it, or give this one its own TMPDIR",
                   file=sys.stderr)
             return 2
-        return _run(args, ctx)
+        try:
+            return _run(args, ctx)
+        finally:
+            if not args.keep_renders:
+                clear_renders(ctx.cache)
+
+
+def clear_renders(cache: Path) -> None:
+    """Removes what a run rendered into ``cache`` (not its lock). Every section renders its
+    recordings afresh, so they are scratch once the run is done; left behind, a full run's
+    ~14 GB filled the disk that the next CI run shared with /tmp."""
+    for entry in cache.iterdir():
+        if entry.name == ".lock":
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
 
 
 @contextlib.contextmanager

@@ -22,3 +22,14 @@ def test_a_second_run_on_a_busy_cache_is_refused_in_one_line(tmp_path, monkeypat
         assert mine
         with run._cache_lock(cache) as second:
             assert not second
+
+
+def test_a_finished_run_leaves_its_lock_and_none_of_its_renders(tmp_path):
+    """Every section renders afresh, so a run's recordings (~14 GB) are scratch afterwards."""
+    cache = tmp_path / "wristtrack-bench"
+    (cache / "robust-clean-0" / "rgb").mkdir(parents=True)
+    (cache / "robust-clean-0" / "rgb" / "000000.png").write_bytes(b"png")
+    (cache / "stray.csv").write_text("t\n")
+    (cache / ".lock").write_text("")
+    run.clear_renders(cache)
+    assert [p.name for p in cache.iterdir()] == [".lock"]
