@@ -38,10 +38,10 @@ class TrackerConfig:
     nis_lost_after: int = 5
     # Manoeuvres: a frame whose association fails (fewer than min_markers markers, or an
     # update beyond the NIS quantile) although enough undoubted blobs (min_markers, none
-    # suspect: Tracker._undoubted) are there is associated again with
-    # the prior's velocity variances raised by (a dt)^2, (alpha dt)^2 for each (a m/s^2,
-    # alpha rad/s^2) in turn: an unmodelled acceleration (a fast reach peaks at ~15 m/s^2).
-    # A retry is kept only if its update is consistent. () = off (the paper's method).
+    # suspect: Tracker._undoubted) are there is associated again with the prior's velocity
+    # variances raised by (a dt)^2, (alpha dt)^2 for each (a m/s^2, alpha rad/s^2) in turn: an
+    # unmodelled acceleration (a fast reach peaks at ~15 m/s^2). A retry is kept only if its
+    # update is consistent. () = off (the paper's method).
     manoeuvre_accel: tuple[tuple[float, float], ...] = ((15.0, 15.0), (45.0, 45.0))
     # A frame still short of min_markers markers (after the retry) among enough blobs, or
     # whose inconsistent or retried update left the markers off their blobs, is fitted afresh,
