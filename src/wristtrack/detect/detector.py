@@ -109,8 +109,7 @@ class MarkerDetector(MarkerLearning, TrackingWindow):
         self._focal = math.sqrt(camera.fx * camera.fy)
         self._last_diameter = math.nan
         self.blob_size = BlobSize()  # the blobs' typical length on the expected one, learned
-        self._window: tuple[tuple[int, int, int, int], float] | None = None  # TrackingWindow's
-        self._counts: list[int] = []
+        self._start_window()
 
     @property
     def reference(self) -> np.ndarray:

@@ -4,7 +4,7 @@ of motion blur, and markers in the lamp's shade.
 
 Mixed into :class:`wristtrack.detect.detector.MarkerDetector`, whose ``config``, ``skin``,
 ``camera``, ``last_blobs``, ``_prev_uv``, ``_last_diameter``, ``marker_bgr``, ``skin_bgr`` and
-``_short`` it uses; it keeps ``_window`` and ``_counts``.
+``_short`` it uses; it keeps ``_window`` and ``_counts`` (``_start_window``).
 """
 
 from __future__ import annotations
@@ -35,6 +35,11 @@ class TrackingWindow:
 
     _window: tuple[tuple[int, int, int, int], float] | None  # the last window, its timestamp
     _counts: list[int]  # blobs found in each of the last RECENT_FRAMES frames
+
+    def _start_window(self) -> None:
+        """No window yet, and no frames counted."""
+        self._window = None
+        self._counts = []
 
     def _missed_markers(self, bgr, depth, near, blobs: list[Blob],
                         timestamp: float) -> list[Blob]:
