@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 
 from wristtrack.detect.blobs import shapes, trimmed_depth
+from wristtrack.detect.config import DetectorConfig
 
 MIN_FRACTION = 0.12  # a pixel is part of a streak when the marker covered it this long
 MAX_STREAK_RATIO = 8.0  # streak length / marker diameter above: not one marker
@@ -80,12 +81,14 @@ def find_chroma_blobs(
     skin_bgr: np.ndarray,
     diameter_px: float,
     skin_around: bool = False,
+    depth_trim: tuple[float, float] = DetectorConfig().depth_trim,
 ) -> list[ChromaBlob]:
     """Blobs of marker chromaticity one marker diameter ``diameter_px`` wide in the window
     ``box`` (x0, y0, x1, y1) of ``bgr``, streaks (longer than STREAK_RATIO diameters) or not
     (:func:`is_shaded_marker` tells a marker in the shade). ``marker_bgr`` and ``skin_bgr`` are
     the two colours mixed. ``skin_around``: each pixel's t taken above the skin around it, not
-    above ``skin_bgr`` (for the shade: see below)."""
+    above ``skin_bgr`` (for the shade: see below). A blob's depth is the trimmed mean of its
+    core's readings, between the ``depth_trim`` quantiles, as the colour search's."""
     x0, y0, x1, y1 = box
     win = bgr[y0:y1, x0:x1]
     cs, cm = chromaticity(skin_bgr), chromaticity(marker_bgr)
@@ -141,7 +144,7 @@ def find_chroma_blobs(
         z = np.nan
         if depth is not None:
             z = float(trimmed_depth(depth[y0:y1, x0:x1][sl][None], (w > 0.3)[None],
-                                    (0.2, 0.8))[0])
+                                    depth_trim)[0])
         out.append(ChromaBlob(x0 + bx + float(sh.cx[0]), y0 + by + float(sh.cy[0]), z, length,
                               width, float(sh.angle[0]), float(t[sl][mask].max()) - base))
     return out

@@ -77,7 +77,7 @@ class TrackingWindow:
         box = (max(box[0] - grow, 0), max(box[1] - grow, 0), min(box[2] + grow, W),
                min(box[3] + grow, H))
         for c in find_chroma_blobs(bgr, depth, box, self.marker_bgr, self.skin_bgr, d,
-                                   skin_around=shade):
+                                   skin_around=shade, depth_trim=self.config.depth_trim):
             if any(math.hypot(c.u - a, c.v - b) < d for a, b in found):
                 continue  # the colour search has this one
             if shade and not is_shaded_marker(c, d):
