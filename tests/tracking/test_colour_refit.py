@@ -18,8 +18,10 @@ from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 def test_fast_colour_only_turns_are_followed(rendered):
     """The rgb_only movement played in 2 s: the filter alone is carried towards the mirror image
-    at each pass through the fronto-parallel view (5.2 deg RMS, 11 deg at the 95th percentile);
-    refitted where the pixels say so decisively, 3.4 deg."""
+    at each pass through the fronto-parallel view (3.4 deg RMS, 8 deg at the 95th percentile);
+    refitted where the pixels say so decisively, 2.6 deg and 4 deg. (With the model's pixel
+    sigma over the first half second, before pixel_noise.EARLY_FRAMES: 5.2 and 11 deg alone,
+    3.4 deg refitted.)"""
     camera, hand, detections, truth = recorded_detections(rendered("rgb_only", duration=2.0))
     assert all(d.depth is None for d in detections)
 
@@ -30,7 +32,8 @@ def test_fast_colour_only_turns_are_followed(rendered):
     refitted = run(TrackerConfig())
     alone = run(TrackerConfig(reacquire=False))
     assert refitted["cover"] == 1.0
-    assert refitted["rot"] < 4.0 and refitted["rot"] < 0.7 * alone["rot"], (refitted, alone)
+    assert refitted["rot"] < 3.0 and refitted["rot"] < 0.85 * alone["rot"], (refitted, alone)
+    assert refitted["rot95"] < 0.6 * alone["rot95"], (refitted, alone)
 
 
 def _view():

@@ -235,7 +235,8 @@ class LearnedNoise:
                    model_sigma: float) -> bool:
         """Keep one frame for the blob errors; measure the window once it spans WINDOW_S and
         take the sigma it gives (whether it changed). A new observation (W0 or the layout
-        changed) starts a new window."""
+        changed) starts a new window. Until the first window is measured, the open one's frames
+        so far give a provisional sigma (pixel_noise.EARLY_FRAMES)."""
         if obs is not self._window_obs:
             self._window, self._window_obs = [], obs
         self._window_span = self._window_span + max(dt, 0.0) if self._window else 0.0
@@ -245,18 +246,31 @@ class LearnedNoise:
         blob_of[labels[blobs]] = blobs
         self._window.append((x, blob_of, det.uv, self.speed2))
         if not pixel_noise.window_full(self._window_span):
+            if self.spread.variance is None and len(self._window) >= pixel_noise.EARLY_FRAMES:
+                residuals, dof = self._window_residuals(obs)
+                return self._take_sigma(pixel_noise.filter_sigma(
+                    model_sigma, pixel_noise.frame_variance(residuals, dof),
+                    self._worst_inflation()))
             return False
-        # the whole window in one batch (~2 ms per half second), not frame by frame
-        X = np.stack([frame[0] for frame in self._window])
-        uv = np.zeros((len(X), max(1, max(len(f[2]) for f in self._window)), 2))
-        for i, frame in enumerate(self._window):
-            uv[i, :len(frame[2])] = frame[2]
-        residuals, dof = pixel_noise.fit_residuals(
-            obs, X, np.stack([frame[1] for frame in self._window]), uv)
+        residuals, dof = self._window_residuals(obs)
         speed2 = np.array([frame[3] for frame in self._window])
         self.spread.add(residuals, dof, speed2, self._window_span)
         self.correlation.add(residuals, self._window_span)
         self._window = []
-        sigma = pixel_noise.filter_sigma(model_sigma, self.spread.variance, self._inflation())
+        return self._take_sigma(pixel_noise.filter_sigma(model_sigma, self.spread.variance,
+                                                         self._inflation()))
+
+    def _window_residuals(self, obs) -> tuple[np.ndarray, np.ndarray]:
+        """The open window's blob residuals and degrees of freedom (pixel_noise.fit_residuals),
+        its frames in one batch (~2 ms per half second), not frame by frame."""
+        X = np.stack([frame[0] for frame in self._window])
+        uv = np.zeros((len(X), max(1, max(len(f[2]) for f in self._window)), 2))
+        for i, frame in enumerate(self._window):
+            uv[i, :len(frame[2])] = frame[2]
+        return pixel_noise.fit_residuals(
+            obs, X, np.stack([frame[1] for frame in self._window]), uv)
+
+    def _take_sigma(self, sigma: float) -> bool:
+        """Take ``sigma`` (px) as the filter's pixel sigma; whether it changed."""
         changed, self.pixel_sigma = sigma != self.pixel_sigma, sigma
         return changed

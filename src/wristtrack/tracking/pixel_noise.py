@@ -24,6 +24,12 @@ residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of frames
 constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from the truth), times
 MARGIN. Until MIN_WINDOWS windows are measured the inflation is taken at the most it can be,
 errors constant over a window (:func:`worst_inflation`, the number of frames a window holds).
+Before the first window closes, its frames so far (from EARLY_FRAMES on) give the per-frame
+variance (:func:`frame_variance`): the model's 0.3 px over the first half second had left the
+still start's out-of-plane angles to the depth (structured light, 3 seeds: 0.308 -> 0.285 deg;
+clean 0.169 -> 0.162), and on colour alone the filter's first turns to the pixels' mirror image
+(the rgb_only movement in 2 s: 5.2 -> 3.4 deg without the refit, 3.4 -> 2.6 with it). The
+noisier blobs of every effect at once reach the model's sigma anyway.
 
 A long shutter smears the blobs of the fast frames: under a 1/30-1/40 s shutter the scatter was
 0.014 px below 2 px/frame of image speed, 0.024 at 2-5 and 0.091 at 5-10 (rendered, seed 0),
@@ -61,6 +67,9 @@ _SPAN_TOLERANCE = 1e-6  # s: 15 x 1/30 s sums to 0.5 - 6e-17, which closes a win
 TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
 SPREAD_TIME_CONSTANT_S = 2.0  # memory of the per-frame spread: the light and the blur change
 MIN_WINDOWS = 4  # windows measured before the inflation is (the worst case until then)
+# Frames of the first window after which its frames so far give a provisional sigma (3 frames
+# of six markers: 9 degrees of freedom, the sigma within about a quarter)
+EARLY_FRAMES = 3
 MARGIN = 1.5  # the sigma taken, on the blobs' white-noise equivalent (module doc)
 SIGMA_FLOOR = 0.05  # px
 _RANK_TOLERANCE = 1e-9  # of the largest singular value: a direction the markers cannot show
@@ -146,6 +155,14 @@ class BlobSpread:
         """The variance at rest (a), or None before a frame has shown any."""
         c = self.coefficients
         return None if c is None else c[0]
+
+
+def frame_variance(residuals: np.ndarray, dof: np.ndarray) -> float | None:
+    """The blobs' per-frame error variance (px^2 per coordinate) of ``residuals`` (frames,
+    markers, 2; NaN where not measured) at ``dof`` (frames,) degrees of freedom, speed
+    aside; None where they have none."""
+    total = int(np.sum(dof))
+    return float(np.nansum(residuals**2)) / total if total > 0 else None
 
 
 def fit_residuals(obs, X: np.ndarray, labels: np.ndarray,
