@@ -89,3 +89,12 @@ def _interrupt_at(recording, index: int) -> None:
 def interrupt_at() -> Callable:
     """``interrupt_at(recording, index)``: a real Ctrl-C as that frame is read (see above)."""
     return _interrupt_at
+
+
+@pytest.fixture(scope="session")
+def every_effect(tmp_path_factory):
+    """The 'mix' movement with every camera and hand effect at its realistic strength
+    (benchmarks.robustness' "all (preset real)", seed 0), its first 136 frames. Read-only."""
+    from benchmarks.robustness import render_condition
+
+    return render_condition(tmp_path_factory.mktemp("every-effect"), "all (preset real)", 0, 136)

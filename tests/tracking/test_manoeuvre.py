@@ -157,15 +157,6 @@ def test_frames_of_a_run_that_dropped_most_follow_the_truth(frames, tmp_path, re
     assert np.abs(errors).max() < 3.0, errors
 
 
-@pytest.fixture(scope="module")
-def every_effect(tmp_path_factory):
-    """The 'mix' movement with every camera and hand effect at its realistic strength
-    (benchmarks.robustness' "all (preset real)", seed 0), its first 136 frames."""
-    from benchmarks.robustness import render_condition
-
-    return render_condition(tmp_path_factory.mktemp("every-effect"), "all (preset real)", 0, 136)
-
-
 def test_a_fresh_fit_after_a_long_gap_holds_under_every_effect(every_effect, tmp_path,
                                                                 cut_recording):
     """Cut to frames 0, 41, 48, 61, 91, 118 and 135: at 135, 0.57 s after the last frame, the

@@ -22,6 +22,7 @@ from wristtrack.tracking.pixel_noise import (
     WINDOW_S,
     BlobCorrelation,
     filter_sigma,
+    prior_inflation,
     worst_inflation,
 )
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
@@ -168,19 +169,35 @@ def test_the_sigma_the_filter_takes_stays_within_its_bounds():
     assert filter_sigma(0.03, 1e-4, 1.0) == 0.03  # a model sharper than the floor keeps its own
 
 
-def test_before_the_correlation_is_measured_it_is_taken_at_its_worst():
+def test_the_bounds_of_the_inflation_are_what_the_correlation_measures_at_its_extremes():
     """Errors constant over a window: inflated by the number of frames a window holds, exactly
-    what the correlation measures for them once it can."""
+    what the correlation measures for them once it can; white errors: about 1."""
     assert worst_inflation(DT) == W
     assert _inflation(np.ones((MIN_WINDOWS * W, 6, 2))) == pytest.approx(worst_inflation(DT))
+    white = np.random.default_rng(3).normal(size=(40 * W, 6, 2))
+    assert _inflation(white) == pytest.approx(1.0, abs=0.2)
     assert worst_inflation(1 / 60) == 31
     assert worst_inflation(2.0) == 2.0  # a window closes on its second frame at the earliest
     assert worst_inflation(0.0) is None  # no frame rate yet: the model's sigma
 
 
-def test_the_learner_takes_the_worst_case_from_its_windows():
-    """Before a window closes, the frames the open one will hold at its spacing; then the frames
-    the last one held (60 fps here: 31)."""
+def test_before_the_correlation_is_measured_it_is_taken_halfway_between_its_bounds():
+    """sqrt(N), N the window's frames: off by at most sqrt(N) from a truth anywhere between
+    white noise (1) and constant errors (N), where either bound is off by N at the other."""
+    N = worst_inflation(DT)
+    prior = prior_inflation(N)
+    assert prior == pytest.approx(np.sqrt(W))
+    truths = np.linspace(1.0, N, 200)
+    def worst_ratio(taken):
+        return np.max(np.maximum(taken / truths, truths / taken))
+    assert worst_ratio(prior) == pytest.approx(np.sqrt(N))
+    assert worst_ratio(prior) < min(worst_ratio(t) for t in (1.0, N, 0.8 * prior, 1.25 * prior))
+    assert prior_inflation(None) is None
+
+
+def test_the_learner_takes_the_prior_from_its_windows():
+    """Before a window closes, sqrt of the frames the open one will hold at its spacing; then
+    of the frames the last one held (60 fps here: 31)."""
     truth, camera, layout = scenario("deviation", rng=np.random.default_rng(0))
     model = Tracker(camera, layout, TrackerConfig()).model
     obs = MarkerObservation(camera, layout.points, np.eye(3), np.array([0.0, 0.0, 0.6]),
@@ -189,14 +206,14 @@ def test_the_learner_takes_the_worst_case_from_its_windows():
     det = Detections(0.0, obs(x[None])[0].reshape(6, 2))
     learned = noise_scale.LearnedNoise()
     learned._add_frame(obs, x, np.arange(6), det, 0.0, 0.3)
-    assert learned._worst_inflation() is None  # one frame: no spacing yet
+    assert learned._prior_inflation() is None  # one frame: no spacing yet
     for _ in range(5):
         learned._add_frame(obs, x, np.arange(6), det, 1 / 60, 0.3)
-    assert learned._worst_inflation() == 31
+    assert learned._prior_inflation() == pytest.approx(np.sqrt(31))
     for _ in range(30):
         learned._add_frame(obs, x, np.arange(6), det, 1 / 60, 0.3)
     assert learned.correlation.windows == 1 and learned.correlation.frames == 31
-    assert learned._worst_inflation() == 31
+    assert learned._inflation() == pytest.approx(np.sqrt(31))  # one window: not measured yet
 
 
 def _sigmas_before_the_correlation(blob_sigma: float) -> list[float]:
@@ -217,12 +234,12 @@ def _sigmas_before_the_correlation(blob_sigma: float) -> list[float]:
 
 
 def test_sharp_blobs_are_trusted_more_before_their_correlation_is_known():
-    """0.01 px blobs are taken at MARGIN x 4 x 0.01 px (the worst correlation, 16 frames)
+    """0.02 px blobs are taken at MARGIN x 2 x 0.02 px (the prior inflation, sqrt(16) = 4)
     from the first window on, and near it from the first window's EARLY_FRAMES-th frame (the
     initialisation's frame, then EARLY_FRAMES tracked: the estimate at 9 degrees of freedom,
     the filter still settling); 0.3 px blobs keep the model's sigma all along."""
-    sharp = _sigmas_before_the_correlation(0.01)
-    expected = MARGIN * 4 * 0.01
+    sharp = _sigmas_before_the_correlation(0.02)
+    expected = MARGIN * 2 * 0.02
     assert len(sharp) > 30 and sharp[-1] == pytest.approx(expected, rel=0.2), sharp
     model = TrackerConfig().measurement.pixel_sigma
     assert sharp[0] == model  # nothing measured yet
@@ -307,7 +324,7 @@ def test_the_blur_share_is_taken_at_the_frames_speed_up_to_the_model():
     s2 = np.linspace(0, 1e6, 16)  # residuals of 0.01 px at rest, growing with the speed
     learned.spread.add(np.ones((16, 6, 2)) * np.sqrt(1e-4 + 1e-9 * s2)[:, None, None],
                        np.full(16, 12), s2, 0.5)
-    learned.correlation.frames = 16  # the worst case until measured
+    learned.correlation.frames = 16  # the prior, sqrt(16), until measured
     learned.speed2 = 1e8  # far beyond what the model's sigma allows
     learned.apply(obs)
     assert obs.motion_variance == pytest.approx(0.3**2 - 0.05**2)

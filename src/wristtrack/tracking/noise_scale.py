@@ -217,14 +217,20 @@ class LearnedNoise:
         return min(blur, obs.suspect_variance)
 
     def _inflation(self) -> float | None:
-        """The correlation's inflation as measured, or until it is, the most it can be."""
+        """The correlation's inflation as measured, or until it is, the prior's
+        (pixel_noise.prior_inflation)."""
         measured = self.correlation.inflation
-        return measured if measured is not None else self._worst_inflation()
+        return measured if measured is not None else self._prior_inflation()
 
-    def _worst_inflation(self) -> float | None:
-        """The inflation of errors constant over a window (pixel_noise.worst_inflation): the
-        frames the last window held, or before one closed, the frames the open one will hold at
-        its spacing so far (None before it has two frames)."""
+    def _prior_inflation(self) -> float | None:
+        """pixel_noise.prior_inflation of the frames a window holds (:meth:`_window_frames`)."""
+        return pixel_noise.prior_inflation(self._window_frames())
+
+    def _window_frames(self) -> float | None:
+        """The frames a window holds (the inflation of errors constant over it,
+        pixel_noise.worst_inflation): the frames the last window held, or before one closed,
+        the frames the open one will hold at its spacing so far (None before it has two
+        frames)."""
         if self.correlation.frames:
             return float(self.correlation.frames)
         if len(self._window) < 2:
@@ -250,7 +256,7 @@ class LearnedNoise:
                 residuals, dof = self._window_residuals(obs)
                 return self._take_sigma(pixel_noise.filter_sigma(
                     model_sigma, pixel_noise.frame_variance(residuals, dof),
-                    self._worst_inflation()))
+                    self._prior_inflation()))
             return False
         residuals, dof = self._window_residuals(obs)
         speed2 = np.array([frame[3] for frame in self._window])

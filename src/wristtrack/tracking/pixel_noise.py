@@ -22,14 +22,26 @@ frames, meets them larger than one frame's noise. So the sigma is the white-nois
 over WINDOW_S: the per-frame variance (``BlobSpread``) times the inflation that windows of the
 residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of frames for a
 constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from the truth), times
-MARGIN. Until MIN_WINDOWS windows are measured the inflation is taken at the most it can be,
-errors constant over a window (:func:`worst_inflation`, the number of frames a window holds).
-Before the first window closes, its frames so far (from EARLY_FRAMES on) give the per-frame
-variance (:func:`frame_variance`): the model's 0.3 px over the first half second had left the
-still start's out-of-plane angles to the depth (structured light, 3 seeds: 0.308 -> 0.285 deg;
-clean 0.169 -> 0.162), and on colour alone the filter's first turns to the pixels' mirror image
-(the rgb_only movement in 2 s: 5.2 -> 3.4 deg without the refit, 3.4 -> 2.6 with it). The
-noisier blobs of every effect at once reach the model's sigma anyway.
+MARGIN. Before the first window closes, its frames so far (from EARLY_FRAMES on) give the
+per-frame variance (:func:`frame_variance`): the model's 0.3 px over the first half second had
+left the still start's out-of-plane angles to the depth (structured light, 3 seeds: 0.308 ->
+0.285 deg; clean 0.169 -> 0.162), and on colour alone the filter's first turns to the pixels'
+mirror image (the rgb_only movement in 2 s: 5.2 -> 3.4 deg without the refit, 3.4 -> 2.6 with
+it). The noisier blobs of every effect at once reach the model's sigma anyway.
+
+Until MIN_WINDOWS windows are measured the inflation is not known, only its bounds: 1 (white
+noise) and the number of frames a window holds, N (errors constant over it;
+:func:`worst_inflation`). It is taken at their geometric middle, sqrt(N)
+(:func:`prior_inflation`), which is off by at most sqrt(N) whatever the truth; either bound can
+be off by N. The worst case N, taken before, is what a still hand's blobs show (their errors are
+the same in every frame), but a still hand's depth errors are just as constant, and inflating
+the pixels' alone handed their weight to the depth; once the hand moves the blobs cross the
+pixel grid and the rendered recordings' errors show 1.7-5 (truth, half-second windows moving
+0.9-6 px per frame, clean and structured light). So N cost the first two seconds: orientation
+RMSE, rendered recordings, 3 seeds, with sqrt(N) instead: structured light 0.286 -> 0.249 deg,
+clean 0.162 -> 0.148, every effect at once 0.648 -> 0.644, left hands 0.594 -> 0.589; H.264,
+whose blocks stay put for longer, 0.330 -> 0.341. Halfway in the figures too: 2.5 did better on
+the sharp recordings and worse under H.264 (0.350), 6 the other way round.
 
 A long shutter smears the blobs of the fast frames: under a 1/30-1/40 s shutter the scatter was
 0.014 px below 2 px/frame of image speed, 0.024 at 2-5 and 0.091 at 5-10 (rendered, seed 0),
@@ -66,7 +78,7 @@ WINDOW_S = 0.5  # the span of frames whose errors the filter weighs together
 _SPAN_TOLERANCE = 1e-6  # s: 15 x 1/30 s sums to 0.5 - 6e-17, which closes a window
 TIME_CONSTANT_S = 10.0  # memory of the inflation: ~20 windows
 SPREAD_TIME_CONSTANT_S = 2.0  # memory of the per-frame spread: the light and the blur change
-MIN_WINDOWS = 4  # windows measured before the inflation is (the worst case until then)
+MIN_WINDOWS = 4  # windows measured before the inflation is (prior_inflation until then)
 # Frames of the first window after which its frames so far give a provisional sigma (3 frames
 # of six markers: 9 degrees of freedom, the sigma within about a quarter)
 EARLY_FRAMES = 3
@@ -226,6 +238,13 @@ def worst_inflation(frame_interval: float) -> float | None:
     return float(math.ceil((WINDOW_S - _SPAN_TOLERANCE) / frame_interval) + 1)
 
 
+def prior_inflation(window_frames: float | None) -> float | None:
+    """The inflation taken before it is measured: the geometric middle of its bounds, 1 (white
+    noise) and ``window_frames`` (errors constant over a window; :func:`worst_inflation`), 4 at
+    30 fps (module doc); None where the window's frames are not known."""
+    return None if window_frames is None else math.sqrt(window_frames)
+
+
 def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float, r2: float) -> float:
     """The markers' squared image speed (px/s)^2 of a hand moving at ``v`` (m/s) and turning at
     ``w`` (rad/s) at depth ``z`` (m): (fx / z)^2 (|v|^2 + |w|^2 r^2), ``r2`` the markers' mean
@@ -248,7 +267,7 @@ def motion_variance(per_speed2: float, speed2: float, inflation: float | None) -
 def filter_sigma(model_sigma: float, variance: float | None, inflation: float | None) -> float:
     """The pixel sigma the filter takes: MARGIN times the white-noise equivalent of the blobs'
     per-frame ``variance`` (px^2) under the correlation's ``inflation`` (measured, or
-    :func:`worst_inflation`), within [SIGMA_FLOOR, model_sigma]; the model's where either is
+    :func:`prior_inflation`), within [SIGMA_FLOOR, model_sigma]; the model's where either is
     not known yet."""
     if inflation is None or variance is None:
         return model_sigma
