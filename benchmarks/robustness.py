@@ -96,7 +96,12 @@ def _truth_markers(folder: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def recall(results: list, detections: list, uv: np.ndarray, vis: np.ndarray) -> float:
-    """Markers used (a blob with the marker's label within USED_PX of its truth) / visible."""
+    """Markers used / visible. A marker is used where a blob with its label lies within
+    USED_PX of its truth, or where a blob measured the mean of merged markers among them
+    (FrameResult.merged) and lies within USED_PX of the mean of their truths: the filter took
+    that blob for all of them (tracking/merged.py). Counted by the label alone, the rendered
+    right hands making the left hand's movement, whose knuckles line up at the extremes,
+    came out at 97.3-98.5 % (6 seeds) where 98.9-100 % of their markers were used."""
     used = visible = 0
     for k, (res, det) in enumerate(zip(results, detections, strict=True)):
         seen = vis[k] >= 0.5
@@ -104,8 +109,11 @@ def recall(results: list, detections: list, uv: np.ndarray, vis: np.ndarray) -> 
         if not res.has_estimate or det.count == 0:
             continue
         for blob, label in enumerate(res.labels):
-            if label >= 0 and seen[label] and np.linalg.norm(det.uv[blob] - uv[k, label]) < USED_PX:
-                used += 1
+            if label < 0:
+                continue
+            markers = np.array(res.merged.get(blob, (label,)))
+            if np.linalg.norm(det.uv[blob] - uv[k, markers].mean(axis=0)) < USED_PX:
+                used += int(seen[markers].sum())
     return used / visible if visible else float("nan")
 
 

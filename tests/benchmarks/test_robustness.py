@@ -21,8 +21,8 @@ from benchmarks.robustness import (
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 
 
-def _res(labels, estimate=True):
-    return SimpleNamespace(labels=np.array(labels), has_estimate=estimate)
+def _res(labels, estimate=True, merged=None):
+    return SimpleNamespace(labels=np.array(labels), has_estimate=estimate, merged=merged or {})
 
 
 def test_recall_counts_rightly_labelled_visible_markers_only():
@@ -35,6 +35,23 @@ def test_recall_counts_rightly_labelled_visible_markers_only():
     # Frame 1: no estimate -> 0 of 5.
     results = [_res([0, 2, 1, 3, 4, 5]), _res([0, 1, 2, 3, 4, 5], estimate=False)]
     assert recall(results, [blobs, blobs], uv, vis) == pytest.approx(4 / 11)
+
+
+def test_recall_counts_the_markers_a_merged_blob_stood_for():
+    """MCP4 and MCP5 merged into one blob labelled MCP4: on the mean of their centres it was
+    used for both; on MCP4's own centre, 10 px from that mean, for neither (the filter took it
+    as the mean)."""
+    uv = np.zeros((2, 6, 2))
+    uv[:, :, 0] = np.arange(6) * 20.0  # marker k at (20 k, 0)
+    vis = np.ones((2, 6))
+    on_mean = SimpleNamespace(uv=np.vstack((uv[0, :4], uv[0, 4:].mean(axis=0))), count=5)
+    on_own = SimpleNamespace(uv=uv[0, :5].copy(), count=5)
+    merged = {4: (4, 5)}
+    labels = [0, 1, 2, 3, 4]
+    assert recall([_res(labels, merged=merged)], [on_mean], uv[:1], vis[:1]) == 1.0
+    assert recall([_res(labels, merged=merged)], [on_own], uv[:1], vis[:1]) == pytest.approx(4 / 6)
+    assert recall([_res(labels)], [on_own], uv[:1], vis[:1]) == pytest.approx(5 / 6)  # no merge
+    assert recall([_res(labels)], [on_mean], uv[:1], vis[:1]) == pytest.approx(4 / 6)
 
 
 def test_blob_errors_against_hand_built_truth():

@@ -96,10 +96,12 @@ def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
         code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth,
                                                      _blob_var(obs, det), *args)
         outcomes[code] += 1
-        x_g, P_g, labels_g, n_g, nis_g, dof_g = tracker._generic_frame(det, _Track(x, P, 0.0), dt)
+        x_g, P_g, labels_g, n_g, nis_g, dof_g, merged_g = tracker._generic_frame(
+            det, _Track(x, P, 0.0), dt)
         if code == compiled.DECLINED:
             continue
         np.testing.assert_array_equal(labels, labels_g)
+        assert merged_g == {}  # the step takes no frame where markers may have merged
         assert n_pairs == n_g and 3 * n_pairs == dof_g
         assert _close(x_c, x_g), np.linalg.norm(x_c - x_g) / np.linalg.norm(x_g)
         assert _close(P_c, P_g), np.linalg.norm(P_c - P_g) / np.linalg.norm(P_g)

@@ -124,9 +124,9 @@ def test_the_compiled_step_leaves_a_frame_with_overlapping_markers_to_the_generi
     dt = 1 / 30
     assert step(x, P, dt, det.uv, det.depth, _blob_var(obs, det), *args)[0] == compiled.DECLINED
     assert tracker._compiled_frame(det, _Track(x, P, 0.0), dt) is None
-    # the generic path takes it with the blob as both
-    labels = tracker._generic_frame(det, _Track(x, P, 0.0), dt)[2]
-    assert labels.tolist() == [0, 1, 2, 3, 4]
+    # the generic path takes it with the blob as both, and says so
+    out = tracker._generic_frame(det, _Track(x, P, 0.0), dt)
+    assert out[2].tolist() == [0, 1, 2, 3, 4] and out[-1] == {4: (4, 5)}
     # without merged blobs in the configuration the step takes it, with the generic path's result
     off = compiled.frame_constants(tracker.model, obs, cfg.ukf, cfg.facing_cos,
                                    tracker.assoc_params, merged_blobs=False)
@@ -172,6 +172,10 @@ def test_a_left_hand_whose_knuckle_markers_line_up_is_tracked_through_it(tmp_pat
         results = [tracker.step(d) for d in detections]
         assert all(r.has_estimate for r in results)
         lined_up = slice(31, 38)  # frames 141-147 of the recording
+        # the results say which blobs stood for which knuckles (the benchmark's recall reads it)
+        groups = [g for r in results[lined_up] for g in r.merged.values()]
+        assert (len(groups) > 0 and all(set(g) <= {3, 4, 5} and len(g) > 1 for g in groups)) \
+            if on else not groups
         worst[on] = max(np.degrees(rotation_angle(r.R_ch @ t.T))
                         for r, t in zip(results[lined_up], truth.R_ch[lined_up], strict=True))
     assert worst[True] < 1.4 and worst[True] < 0.5 * worst[False], worst

@@ -26,8 +26,9 @@ from wristtrack.tracking.observation import MarkerObservation
 
 class StepResult(NamedTuple):
     """A frame's markers update: the posterior, each blob's marker (-1: clutter), how many
-    markers were associated, and the update's NIS with its degrees of freedom (NaN, 0 without
-    an update or with JPDA's)."""
+    markers were associated, the update's NIS with its degrees of freedom (NaN, 0 without
+    an update or with JPDA's), and the blobs where markers merged (blob -> its markers,
+    tracking/merged.py)."""
 
     x: np.ndarray
     P: np.ndarray
@@ -35,6 +36,7 @@ class StepResult(NamedTuple):
     n_assoc: int
     nis: float
     dof: int
+    merged: dict[int, tuple[int, ...]]
 
 
 def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt: float,
@@ -63,7 +65,7 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
     gated = assoc.gate(d2, z, assoc_params)
     marker_ids = np.flatnonzero(expected)
 
-    nis, dof = np.nan, 0
+    nis, dof, merged_markers = np.nan, 0, {}
     if config.association == "jpda":
         beta = assoc.jpda_marginals(assoc.pair_scores(llr, assoc_params), gated)
         labels = assoc.labels_from_marginals(beta)
@@ -86,9 +88,10 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
                                groups)
         if res is not None:
             x, P, nis, dof = res.x, res.P, res.nis, res.dof
+            merged_markers = {int(b): tuple(int(m) for m in group) for b, group in groups.items()}
 
     n_assoc = int(np.unique(labels[labels >= 0]).size)
-    return StepResult(x, P, labels, n_assoc, nis, dof)
+    return StepResult(x, P, labels, n_assoc, nis, dof, merged_markers)
 
 
 # The prior a fit's covariance is taken from: far wider than what one frame's markers tell.

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
@@ -47,6 +47,9 @@ class FrameResult:
     # moves W0 (tracking/neutral.py); the smoother never smooths across two ids
     track_id: int = -1
     side: str = "right"  # the hand's side (from its layout): signs of the anatomical angles
+    # blob -> the markers (its label's among them) whose mean the blob measured: where markers
+    # seen close together merged into one blob (tracking/merged.py); empty in most frames
+    merged: dict[int, tuple[int, ...]] = field(default_factory=dict)
 
     @property
     def has_estimate(self) -> bool:

@@ -280,7 +280,7 @@ class Tracker:
         out = plain = self._filter_frame(det, track, dt)
         if _undoubted(det) >= cfg.min_markers and hasattr(self.model, "angular_velocity"):
             out = self._manoeuvre_retry(det, track, dt, plain)
-        x, P, labels, n_assoc, nis, dof = out
+        x, P, labels, n_assoc, nis, dof, merged_markers = out
         if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
             self._lose()
             return self._empty(det, Status.LOST)
@@ -303,6 +303,7 @@ class Tracker:
             x, P = ukf.predict(self.model, track.x, track.P, dt, self.model.process_noise(dt),
                                params=cfg.ukf)
             labels, n_assoc, nis, dof = np.full(det.count, -1), 0, np.nan, 0
+            merged_markers = {}
         if cfg.reacquire and det.depth is None and n_assoc >= 4:
             refit = hypotheses.colour_refit(self, det, x, labels)
             if refit is not None:
@@ -326,7 +327,8 @@ class Tracker:
         self.status = status
         one_to_one = cfg.association == "gnn"  # then the blobs not taken are the clutter
         n_clutter = len(labels) - n_assoc if one_to_one else int(np.sum(labels < 0))
-        return self._result(det, status, labels, n_assoc, nis, dof, dt, n_clutter)
+        return self._result(det, status, labels, n_assoc, nis, dof, dt, n_clutter,
+                            merged_markers)
 
     def _provisional_w0(self) -> tuple | None:
         """During the still start, W0 fitted to its frames so far, else None."""
@@ -343,8 +345,9 @@ class Tracker:
                                   getattr(self.model, "angular_velocity", None)))
 
     def _filter_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
-        """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof). The
-        markers' update, then the skin's where it is known (NIS and dof are the markers')."""
+        """Predict, associate, update: (x, P, labels, markers associated, NIS, its dof,
+        merged blobs: generic_step.StepResult). The markers' update, then the skin's where it
+        is known (NIS and dof are the markers')."""
         out = self._compiled_frame(det, track, dt)
         if out is None:
             out = self._generic_frame(det, track, dt)
@@ -415,11 +418,10 @@ class Tracker:
         code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, var, *args)
         if code != compiled.OK:
             return None
-        return x, P, labels, n_pairs, nis, 3 * n_pairs
+        return x, P, labels, n_pairs, nis, 3 * n_pairs, {}  # merges: left to the generic step
 
     def _generic_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
-        """Any configuration, any frame: (x, P, labels, markers associated, NIS, its dof)
-        (tracking/generic_step.py)."""
+        """Any configuration, any frame: generic_step.StepResult as a tuple."""
         obs = self._observation(self.config.use_depth and det.depth is not None)
         return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
                                   self.assoc_params, self.camera, self.R_c0,
@@ -433,7 +435,7 @@ class Tracker:
     # -------------------------------------------------------------------------------- output
 
     def _result(
-        self, det, status, labels, n_assoc, nis, dof, dt=None, n_clutter=None
+        self, det, status, labels, n_assoc, nis, dof, dt=None, n_clutter=None, merged=None
     ) -> FrameResult:
         track = self._track
         R_rel, p = self.model.pose(track.x[None])
@@ -465,7 +467,7 @@ class Tracker:
             R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels, n_visible=n_assoc,
             n_clutter=n_clutter, nis=nis, nis_dof=dof, pos_sigma_mm=pos_sigma,
             rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._track_id,
-            side=self.layout.side,
+            side=self.layout.side, merged=merged or {},
         )
 
 
