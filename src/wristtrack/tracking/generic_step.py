@@ -50,8 +50,9 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
         model, x, P, dt, model.process_noise(dt), obs, params=config.ukf
     )
     prior = (x, P)
-    own = np.diag(obs.noise_variance(pred.y))
-    R = own + obs.shared_covariance(x)
+    own = obs.noise_variance(pred.y)
+    shared = obs.shared_covariance(x)
+    R = np.diag(own) + shared
     expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
 
     n_markers = obs.n_markers
@@ -59,7 +60,7 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
     # Each marker is matched to a blob by its own noise: the noise the markers share (skin
     # slide, misregistration) moves them together, and counted in every marker's gate
     # alone it let clutter beside a marker in. The update takes all of it.
-    S = diagonal_blocks(pred.Pyy + own, n_markers, k)[expected]
+    S = diagonal_blocks(pred.Pyy + np.diag(own), n_markers, k)[expected]
     z = det.uv if k == 2 else np.column_stack((det.uv, det.depth))
     llr, d2 = assoc.log_likelihood_ratios(z, y_hat, S, assoc_params)
     gated = assoc.gate(d2, z, assoc_params)
@@ -84,8 +85,8 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
             y_all = pred.y.reshape(n_markers, k)
             diameter = merged.marker_diameters(camera.fx, obs.marker_points(x[None])[0, :, 2])
             groups = merged.merged_groups(y_all[:, :2], diameter, expected, labels, det.uv)
-        res = _labelled_update(model, obs, prior, pred, R, det, z, labels, config, iterations,
-                               groups)
+        res = _labelled_update(model, obs, prior, pred, (own, shared), det, z, labels, config,
+                               iterations, groups)
         if res is not None:
             x, P, nis, dof = res.x, res.P, res.nis, res.dof
             merged_markers = {int(b): tuple(int(m) for m in group) for b, group in groups.items()}
@@ -111,28 +112,35 @@ def fit_covariance(model, obs: MarkerObservation, x: np.ndarray, det: Detections
     pose = np.diag([_FIT_PRIOR_ROT**2] * 3 + [_FIT_PRIOR_POS**2] * 3)
     P = model.initial_covariance(pose)
     pred = ukf.predict_measurement(model, x, P, obs, config.ukf)
-    R = np.diag(obs.noise_variance(pred.y)) + obs.shared_covariance(x)
+    noise = (obs.noise_variance(pred.y), obs.shared_covariance(x))
     z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
     # Linearised over the wide prior, h's curvature there counts as noise (rotation sigmas
     # 1.5x too wide on a tilted hand): linearise it over the posterior instead.
-    post = _labelled_update(model, obs, (x, P), pred, R, det, z, labels, config,
+    post = _labelled_update(model, obs, (x, P), pred, noise, det, z, labels, config,
                             _FIT_ITERATIONS)
     return P if post is None else post.P
 
 
 def _labelled_update(model, obs: MarkerObservation, prior: tuple[np.ndarray, np.ndarray],
-                     pred: ukf.MeasurementPrediction, R: np.ndarray, det: Detections,
-                     z: np.ndarray, labels: np.ndarray, config: TrackerConfig,
+                     pred: ukf.MeasurementPrediction, noise: tuple[np.ndarray, np.ndarray],
+                     det: Detections, z: np.ndarray, labels: np.ndarray, config: TrackerConfig,
                      iterations: int, groups: dict[int, np.ndarray] | None = None,
                      ) -> ukf.UpdateResult | None:
-    """The update of ``prior`` (its measurement prediction ``pred``, the full noise ``R``) with
-    the blobs ``z`` of ``det`` that ``labels`` names as markers (a blob of ``groups`` as the
-    mean of its markers, tracking/merged.py), corrected ``iterations`` more times over its
-    posterior (ukf.iterated_update); None where no blob is a marker."""
+    """The update of ``prior`` (its measurement prediction ``pred``; ``noise``: each marker's
+    own variances (6*k,) and the covariance the markers share (6*k, 6*k)) with the blobs ``z``
+    of ``det`` that ``labels`` names as markers (a blob of ``groups`` as the mean of its
+    markers, tracking/merged.py), corrected ``iterations`` more times over its posterior
+    (ukf.iterated_update); None where no blob is a marker."""
     A, values, blob, component = merged.measurement_map(labels, z, obs.k, obs.n_markers, groups)
     if values.size == 0:
         return None
-    R_u = A @ R @ A.T + np.diag(_blob_variance(obs, det, blob, component, pred, groups))
+    own, shared = noise
+    # Each blob's own noise is its own: two blobs the paper's rule gives one marker measure it
+    # with independent errors. Mapped as A diag(own) A^T, their rows came out identical, the
+    # innovation covariance singular along their difference (NIS 1e12) and the update forced
+    # the two depths to agree. Without shared markers between rows, the two are the same.
+    R_u = A @ shared @ A.T + np.diag((A**2) @ own
+                                     + _blob_variance(obs, det, blob, component, pred, groups))
     res = ukf.update(model, *prior, pred.mapped(A), values, R_u)
     if iterations:
         res = ukf.iterated_update(model, prior, (res.x, res.P), lambda X: obs(X) @ A.T,
