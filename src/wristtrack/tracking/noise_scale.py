@@ -44,7 +44,8 @@ import numpy as np
 
 from wristtrack.filter import ukf
 from wristtrack.tracking import pixel_noise
-from wristtrack.tracking.observation import MeasurementNoise, stacked_rows
+from wristtrack.tracking.merged import measurement_map
+from wristtrack.tracking.observation import MeasurementNoise
 
 # Memory of the estimate: the fingers' slide changes over a flexion cycle of a few seconds.
 TIME_CONSTANT_S = 2.0
@@ -86,12 +87,12 @@ def slide_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
     if not obs.slide.any() or np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
         return None
     z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
-    rows, values = stacked_rows(labels, z, obs.k)
+    A, values, _, _ = measurement_map(labels, z, obs.k, obs.n_markers)
     pred = ukf.predict_measurement(model, x, P, obs, params)
     y_hat = obs(x[None])[0]
-    R = obs.noise_covariance(x, y_hat)[np.ix_(rows, rows)]
-    residual, HPH = values - y_hat[rows], pred.Pyy[np.ix_(rows, rows)]
-    G = obs.slide_jacobian(x)[rows]
+    R = A @ obs.noise_covariance(x, y_hat) @ A.T
+    residual, HPH = values - A @ y_hat, A @ pred.Pyy @ A.T
+    G = A @ obs.slide_jacobian(x)
     try:
         return component_scores(residual, R, HPH, G @ G.T / slide_factor)
     except np.linalg.LinAlgError:

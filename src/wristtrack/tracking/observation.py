@@ -258,11 +258,3 @@ def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, 
     R[np.diag_indices_from(R)] += np.repeat(obs.blob_variance(suspect, len(uv))[nearest], 2)
     return float(r @ np.linalg.solve(R, r)) <= limit
 
-
-def stacked_rows(labels: np.ndarray, z: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Measurement rows and values of the associated blobs (a blob's NaN depth is left out)."""
-    blobs = np.flatnonzero(labels >= 0)
-    rows = labels[blobs, None] * k + np.arange(k)
-    values = z[blobs]
-    ok = np.isfinite(values)
-    return rows[ok], values[ok]
