@@ -176,6 +176,12 @@ def test_a_left_hand_whose_knuckle_markers_line_up_is_tracked_through_it(tmp_pat
         groups = [g for r in results[lined_up] for g in r.merged.values()]
         assert (len(groups) > 0 and all(set(g) <= {3, 4, 5} and len(g) > 1 for g in groups)) \
             if on else not groups
+        # poses.csv's n_visible counts every marker a merged blob measured
+        for r in results[lined_up]:
+            assert r.n_visible == np.unique(r.labels[r.labels >= 0]).size + sum(
+                len(g) - 1 for g in r.merged.values())
+        if on:
+            assert any(r.n_visible > (r.labels >= 0).sum() for r in results[lined_up])
         worst[on] = max(np.degrees(rotation_angle(r.R_ch @ t.T))
                         for r, t in zip(results[lined_up], truth.R_ch[lined_up], strict=True))
     assert worst[True] < 1.4 and worst[True] < 0.5 * worst[False], worst

@@ -405,7 +405,9 @@ ADAPT_NIS_QUANTILE = 0.95
 
 
 def _confident(result: FrameResult) -> bool:
-    return (result.status == Status.TRACKING and result.n_visible >= 4 and result.nis_dof > 0
+    # the blobs labelled, not the markers measured: a merged blob is one colour sample
+    labelled = np.unique(result.labels[result.labels >= 0]).size
+    return (result.status == Status.TRACKING and labelled >= 4 and result.nis_dof > 0
             and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
 
 

@@ -36,7 +36,7 @@ class FrameResult:
     w: np.ndarray  # (3,) rad/s in W0
     cov: np.ndarray | None  # tangent covariance of the state
     labels: np.ndarray  # (M,) marker index per blob, -1 = clutter
-    n_visible: int  # markers associated in this frame
+    n_visible: int  # markers measured in this frame (each of a merged blob's: ``merged``)
     n_clutter: int  # blobs taken as clutter
     nis: float = np.nan  # normalised innovation squared of the update
     nis_dof: int = 0

@@ -464,7 +464,8 @@ class Tracker:
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum() + w0[3:].sum(), 0.0))
         return FrameResult(
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
-            R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels, n_visible=n_assoc,
+            R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels,
+            n_visible=n_assoc + sum(len(group) - 1 for group in (merged or {}).values()),
             n_clutter=n_clutter, nis=nis, nis_dof=dof, pos_sigma_mm=pos_sigma,
             rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._track_id,
             side=self.layout.side, merged=merged or {},
