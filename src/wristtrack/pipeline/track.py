@@ -398,14 +398,13 @@ def no_initialisation_message(recording: Recording, n_frames: int, tracker: Trac
 
 
 # The detector's colours follow slow changes of the light (detector.adapt) from every
-# ADAPT_EVERY-th frame whose markers the tracker labelled confidently: at least 4 associated and
-# an update whose NIS is within its 95 % chi-square quantile.
+# ADAPT_EVERY-th frame whose markers the tracker labelled confidently: at least 4 blobs labelled
+# (a merged blob is one colour sample) and an update whose NIS is within its 95 % quantile.
 ADAPT_EVERY = 10
 ADAPT_NIS_QUANTILE = 0.95
 
 
 def _confident(result: FrameResult) -> bool:
-    # the blobs labelled, not the markers measured: a merged blob is one colour sample
     labelled = np.unique(result.labels[result.labels >= 0]).size
     return (result.status == Status.TRACKING and labelled >= 4 and result.nis_dof > 0
             and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
