@@ -346,7 +346,7 @@ def quality_figure(
                    fontsize=7, frameon=False)
     ax = axes[1]
     ax.step(t, np.asarray(n_visible, dtype=float), where="mid", color="#1f4fe0",
-            label="markers associated")
+            label="markers measured")
     ax.step(t, np.asarray(n_clutter, dtype=float), where="mid", color="#e41a1c",
             label="clutter blobs")
     ax.set_ylabel("count")
