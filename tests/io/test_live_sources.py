@@ -91,11 +91,14 @@ def _rs():
     return rs
 
 
-def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, lost_depth=()):
+def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, lost_depth=(),
+                              baseline=0.0):
     """Record the first ``n`` frames of a recording folder through the SDK: a software device
     with a colour and a depth sensor (the folder's intrinsics, identity extrinsics, as
-    registered depth is), recorded by the SDK's own recorder; the depth frames ``lost_depth``
-    never reach it (as a USB transfer a device drops). Returns the folder's camera."""
+    registered depth is, or the depth sensor ``baseline`` metres beside the colour one, so
+    the reader aligns them), recorded by the SDK's own recorder; the depth frames
+    ``lost_depth`` never reach it (as a USB transfer a device drops). Returns the folder's
+    camera."""
     rs = _rs()
     rec = FolderRecording(folder)
     cam = rec.camera
@@ -116,7 +119,7 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
         profiles.append(sensor.add_video_stream(vs).as_video_stream_profile())
     depth_profile, color_profile = profiles
     extrinsics = rs.extrinsics()
-    extrinsics.rotation, extrinsics.translation = [1, 0, 0, 0, 1, 0, 0, 0, 1], [0, 0, 0]
+    extrinsics.rotation, extrinsics.translation = [1, 0, 0, 0, 1, 0, 0, 0, 1], [baseline, 0, 0]
     depth_profile.register_extrinsics_to(color_profile, extrinsics)
     depth_sensor.add_read_only_option(rs.option.depth_units, scale)
     dev.create_matcher(rs.matchers.dlr_c)
@@ -229,14 +232,16 @@ def test_realsense_distortion_is_read_from_the_recording(short, tmp_path):
         assert rec.camera.depth_scale == pytest.approx(0.0001, rel=1e-6)
 
 
-def test_a_colour_frame_whose_depth_was_lost_comes_without_depth(reach, tmp_path):
+@pytest.mark.parametrize("baseline", [0.0, 0.025])
+def test_a_colour_frame_whose_depth_was_lost_comes_without_depth(reach, tmp_path, baseline):
     """The SDK's syncer hands a colour frame whose depth frame was lost the last depth frame it
     had (frames 4 and 5 both got frame 3's): a depth of another moment, which would put the
     markers where the hand was then. Such a frame comes without depth; the others with their
-    own (io.base.pairing_tolerance)."""
+    own (io.base.pairing_tolerance). Registered depth as it is, or a sensor 25 mm beside the
+    colour one, whose depth the SDK aligns (rs.align) before it is read."""
     path = tmp_path / "lost.db3"
     lost = (4, 5, 8)
-    write_realsense_recording(path, reach, lost_depth=lost)
+    write_realsense_recording(path, reach, lost_depth=lost, baseline=baseline)
     want = [f for _, f in zip(range(12), FolderRecording(reach).frames(), strict=False)]
     with open_recording(path) as rec:
         got = list(rec.frames())
@@ -245,8 +250,14 @@ def test_a_colour_frame_whose_depth_was_lost_comes_without_depth(reach, tmp_path
         np.testing.assert_array_equal(frame.bgr, truth.bgr)
         if frame.index in lost:
             assert frame.depth is None, f"frame {frame.index} took another frame's depth"
-        else:
+        elif not baseline:
             np.testing.assert_array_equal(frame.depth, truth.depth)
+        else:  # re-projected into the colour camera: the hand's depth moved by the parallax
+            assert not np.array_equal(frame.depth, truth.depth)  # rs.align ran
+            both = (frame.depth > 0) & (truth.depth > 0)
+            assert both.mean() > 0.8
+            diff = np.abs(frame.depth[both].astype(float) - truth.depth[both])
+            assert np.median(diff) * rec.camera.depth_scale < 0.002, np.median(diff)
 
 
 def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_file,

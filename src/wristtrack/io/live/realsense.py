@@ -212,6 +212,7 @@ class RealSenseRecording(Recording):
             if depth and abs(depth.get_timestamp() / 1000.0 - t) > self._tolerance:
                 # The SDK's syncer fills a lost depth frame with the last one it had (a dropped
                 # USB transfer, a late frame under load): that depth shows another moment.
+                # (An aligned depth frame keeps the depth sensor's timestamp: test_live_sources.)
                 depth = None
             t0 = t if t0 is None else t0
             if index < start:  # a resumed recording is read from its start, as it was played
