@@ -182,7 +182,12 @@ def predict_measurement(
 ) -> MeasurementPrediction:
     """Transform sigma points of (x, P) through h: states (S, D) -> measurements (S, m)."""
     w = sigma_weights(model.dim, params.alpha, params.beta, params.kappa)
-    offsets = sigma_offsets(P, w)
+    return _measurement_at(model, x, sigma_offsets(P, w), w, h)
+
+
+def _measurement_at(model: ManifoldModel, x: np.ndarray, offsets: np.ndarray, w: SigmaWeights,
+                    h) -> MeasurementPrediction:
+    """predict_measurement from the sigma points' tangent ``offsets`` about x and weights w."""
     Y = h(model.retract(x, offsets))
     y = w.mean @ Y
     dY = Y - y
@@ -279,13 +284,15 @@ def iterated_update(
         raise ValueError(f"iterated_update needs at least one iteration, got {iterations}")
     x0, P0 = prior
     x1, P1 = posterior
+    w = sigma_weights(model.dim, params.alpha, params.beta, params.kappa)
     for _ in range(iterations):
-        pred = predict_measurement(model, x1, P1, h, params)
+        eps = sigma_offsets(P1, w)  # one set of sigma points for h and for the transport
+        pred = _measurement_at(model, x1, eps, w, h)
         y, Pyy, Pxy = pred.y, pred.Pyy, pred.Pxy
         if rows is not None:
             y, Pyy, Pxy = y[rows], Pyy[np.ix_(rows, rows)], Pxy[:, rows]
         H = np.linalg.solve(P1, Pxy).T  # statistical linearisation: Pxy = P1 H^T
-        d0, Pt = transported(model, (x0, P0), (x1, P1), params)
+        d0, Pt = _transported(model, (x0, P0), x1, P1, eps, w)
         S = H @ Pt @ H.T + (Pyy - H @ P1 @ H.T) + R
         Ae = cholesky_whiten(S, np.column_stack((H @ Pt, z - y - H @ d0)))
         A, e = Ae[:, :-1], Ae[:, -1]
@@ -307,10 +314,16 @@ def transported(model: ManifoldModel, prior: tuple[np.ndarray, np.ndarray],
     posterior is (not at x0), the iterated update's prior term has the gradient of the prior's
     own cost there, so its fixed point is the maximum a posteriori estimate's. Exact where lift
     and retract are linear (a Euclidean state: x0 - x1 and P0)."""
-    x0, P0 = prior
     x1, P1 = at
     w = sigma_weights(model.dim, params.alpha, params.beta, params.kappa)
-    eps = sigma_offsets(P1, w)
+    return _transported(model, prior, x1, P1, sigma_offsets(P1, w), w)
+
+
+def _transported(model: ManifoldModel, prior: tuple[np.ndarray, np.ndarray], x1: np.ndarray,
+                 P1: np.ndarray, eps: np.ndarray, w: SigmaWeights
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """transported, from the sigma points' tangent offsets ``eps`` of (x1, P1), weights w."""
+    x0, P0 = prior
     c = model.lift(x0, model.retract(x1, eps))
     mean = w.mean @ c
     K = np.linalg.solve(P1, (w.cov[:, None] * eps).T @ (c - mean)).T
