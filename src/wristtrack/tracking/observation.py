@@ -257,4 +257,3 @@ def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, 
     nearest = blobs[order][first]
     R[np.diag_indices_from(R)] += np.repeat(obs.blob_variance(suspect, len(uv))[nearest], 2)
     return float(r @ np.linalg.solve(R, r)) <= limit
-
