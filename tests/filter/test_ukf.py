@@ -264,7 +264,7 @@ def test_the_iterated_update_on_a_rotation_reaches_the_map_estimate(monkeypatch)
 
     again = ukf.iterated_update(model, (x0, P0), (once.x, once.P), h, z, R, None, iterations=4)
     assert off(once.x) > 5.0 and off(again.x) < 0.01, (off(once.x), off(again.x))
-    monkeypatch.setattr(ukf, "_transported",
+    monkeypatch.setattr(ukf, "transported",
                         lambda m, prior, x1, P1, eps, w: (m.lift(x1, prior[0][None])[0], prior[1]))
     as_it_is = ukf.iterated_update(model, (x0, P0), (once.x, once.P), h, z, R, None, iterations=4)
     assert off(as_it_is.x) > 0.1, off(as_it_is.x)

@@ -14,19 +14,17 @@ import pytest
 
 from wristtrack.detect.detections import Detections
 from wristtrack.filter import ukf
-from wristtrack.sim.detections import acceptance_noise, simulate_detections
-from wristtrack.sim.motion import scenario
 from wristtrack.tracking.generic_step import _labelled_update
 from wristtrack.tracking.merged import measurement_map
-from wristtrack.tracking.tracker import Tracker, TrackerConfig
+
+from .test_compiled import _initialised_tracker
 
 
 def _setup():
+    """A tracker initialised on a simulated recording, its state, the state's measurement
+    prediction and a random generator."""
     rng = np.random.default_rng(5)
-    truth, camera, layout = scenario("deviation", rng=rng)
-    frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
-    tracker = Tracker(camera, layout, TrackerConfig(association="paper"))
-    assert any(tracker.step(f.detections).has_estimate for f in frames[:10])
+    tracker = _initialised_tracker(seed=7)
     obs = tracker._observation(True)
     x, P = tracker._track.x, tracker._track.P
     pred = ukf.predict_measurement(tracker.model, x, P, obs, tracker.config.ukf)

@@ -292,7 +292,7 @@ def iterated_update(
         if rows is not None:
             y, Pyy, Pxy = y[rows], Pyy[np.ix_(rows, rows)], Pxy[:, rows]
         H = np.linalg.solve(P1, Pxy).T  # statistical linearisation: Pxy = P1 H^T
-        d0, Pt = _transported(model, (x0, P0), x1, P1, eps, w)
+        d0, Pt = transported(model, (x0, P0), x1, P1, eps, w)
         S = H @ Pt @ H.T + (Pyy - H @ P1 @ H.T) + R
         Ae = cholesky_whiten(S, np.column_stack((H @ Pt, z - y - H @ d0)))
         A, e = Ae[:, :-1], Ae[:, -1]
@@ -301,28 +301,19 @@ def iterated_update(
     return UpdateResult(x1, P1, float(e @ e), int(z.shape[0]))
 
 
-def transported(model: ManifoldModel, prior: tuple[np.ndarray, np.ndarray],
-                at: tuple[np.ndarray, np.ndarray],
-                params: UKFParams = UKFParams()) -> tuple[np.ndarray, np.ndarray]:
+def transported(model: ManifoldModel, prior: tuple[np.ndarray, np.ndarray], x1: np.ndarray,
+                P1: np.ndarray, eps: np.ndarray, w: SigmaWeights
+                ) -> tuple[np.ndarray, np.ndarray]:
     """The Gaussian ``prior`` (x0, P0), P0 in the tangent space at x0, as a Gaussian in the
-    tangent space at x1 of ``at`` (x1, P1): its mean's offset from x1 (n,) and its covariance
-    (n, n) there.
+    tangent space at x1 of (x1, P1), whose sigma points are the tangent offsets ``eps`` with
+    weights ``w``: its mean's offset from x1 (n,) and its covariance (n, n) there.
 
     The map from x1's tangent to x0's, eps -> lift(x0, retract(x1, eps)), is linearised
-    statistically over the sigma points of (x1, P1), as the iterated update linearises h:
-    c + K eps. The prior N(0, P0) on it is N(-K^-1 c, K^-1 P0 K^-T) in eps. Linearised where the
+    statistically over those sigma points, as the iterated update linearises h: c + K eps.
+    The prior N(0, P0) on it is N(-K^-1 c, K^-1 P0 K^-T) in eps. Linearised where the
     posterior is (not at x0), the iterated update's prior term has the gradient of the prior's
     own cost there, so its fixed point is the maximum a posteriori estimate's. Exact where lift
     and retract are linear (a Euclidean state: x0 - x1 and P0)."""
-    x1, P1 = at
-    w = sigma_weights(model.dim, params.alpha, params.beta, params.kappa)
-    return _transported(model, prior, x1, P1, sigma_offsets(P1, w), w)
-
-
-def _transported(model: ManifoldModel, prior: tuple[np.ndarray, np.ndarray], x1: np.ndarray,
-                 P1: np.ndarray, eps: np.ndarray, w: SigmaWeights
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """transported, from the sigma points' tangent offsets ``eps`` of (x1, P1), weights w."""
     x0, P0 = prior
     c = model.lift(x0, model.retract(x1, eps))
     mean = w.mean @ c

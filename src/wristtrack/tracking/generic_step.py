@@ -52,7 +52,6 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
     prior = (x, P)
     own = obs.noise_variance(pred.y)
     shared = obs.shared_covariance(x)
-    R = np.diag(own) + shared
     expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
 
     n_markers = obs.n_markers
@@ -70,7 +69,7 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
     if config.association == "jpda":
         beta = assoc.jpda_marginals(assoc.pair_scores(llr, assoc_params), gated)
         labels = assoc.labels_from_marginals(beta)
-        x, P = _jpda_update(model, x, P, pred, R, z, beta, marker_ids, k)
+        x, P = _jpda_update(model, x, P, pred, np.diag(own) + shared, z, beta, marker_ids, k)
     else:
         if config.association == "gnn":
             local = assoc.associate_gnn(assoc.pair_scores(llr, assoc_params), gated)
