@@ -3,8 +3,9 @@ error taken away at a time.
 
 Every-effect recordings (``benchmarks.robustness`` conditions with hand.json, both hands): the
 default tracker on the detections as they are, then with the blobs that are the markers (each
-marker's nearest blob within MATCH_PX or the marker's image radius of its true image position; a
-blob two overlapping markers share stands for their mean, as the tracker takes it) given
+marker's nearest blob within MATCH_PX or the marker's image diameter of its true image position;
+a blob two or three overlapping markers share stands for their mean, as the tracker takes it)
+given
 - their marker's true depth ("depth exact": the layout's marker at the true pose, so the MCP
   markers' skin slide is left out of it), or the true depth plus white noise of the filter's own
   depth model ("depth drawn from the model": Nguyen et al.'s sigma, ``MeasurementNoise``);
@@ -45,7 +46,10 @@ from wristtrack.tracking.tracker import Tracker, TrackerConfig
 BUDGET_CONDITIONS = ("all (preset real)", "all, left hand")
 FUSION_CONDITIONS = ("clean", "structured_light")
 MATCH_PX = 3.0  # a blob this near a marker's true image position is that marker's (or within
-# the marker's image radius: a blob two overlapping markers share sits between them)
+# the marker's image diameter: a blob that overlapping markers share sits at their mean, which
+# for three knuckles lined up is most of a diameter from the outer two. Within the radius only,
+# the outer knuckle was left out, the blob made the mean of two where the tracker takes the
+# mean of three, and "exact" pixels lost the track at the extremes of the movement.)
 VISIBLE = 0.5  # a marker half seen or more gets a model-drawn blob
 OBLIQUE_COS = 0.7
 MODEL_PIXEL_SIGMA = 0.015  # px: sharp rendered blobs against the truth (tracking/pixel_noise.py)
@@ -93,7 +97,7 @@ def corrected(detections: list[Detections], truth, layout, uv: np.ndarray, data:
         points, facing = _markers_at(layout, truth, k)
         blob_uv = det.uv.copy()
         depth = None if det.depth is None else det.depth.copy()
-        reach = np.maximum(MATCH_PX, marker_image_diameter(fx, points[:, 2]) / 2)
+        reach = np.maximum(MATCH_PX, marker_image_diameter(fx, points[:, 2]))
         for b, markers in _blob_markers(det.uv, uv[k], reach).items():
             # a blob two markers share (their discs overlap) is their mean, as the tracker
             # takes it (tracking/merged.py)
@@ -200,7 +204,7 @@ def error_budget_section(result: Result, seeds: tuple[int, ...],
         "",
         f"Every effect combined (seeds {seeds[0]}-{seeds[-1]}): the default tracker on the "
         "detections as they are, and with one source of error taken away from the blobs that "
-        f"are markers (each marker's nearest blob within {MATCH_PX:g} px or its image radius of "
+        f"are markers (each marker's nearest blob within {MATCH_PX:g} px or its image diameter of "
         "its true image position; a blob two markers share gets their mean; "
         "`benchmarks/error_budget.py`). "
         "'depth exact' leaves the MCP markers' skin slide out of their depth; 'depth drawn from "

@@ -26,8 +26,8 @@ def _truth(rotations):
     return SimpleNamespace(R_ch=np.stack(rotations), t_ch=np.tile([0.0, 0.0, 0.6], (n, 1)))
 
 
-def _true_uv(truth):
-    pts = np.einsum("fij,mj->fmi", truth.R_ch, LAYOUT.points) + truth.t_ch[:, None, :]
+def _true_uv(truth, layout=LAYOUT):
+    pts = np.einsum("fij,mj->fmi", truth.R_ch, layout.points) + truth.t_ch[:, None, :]
     return F * pts[..., :2] / pts[..., 2:] + 320.0, pts[..., 2]
 
 
@@ -48,6 +48,24 @@ def test_exact_pixels_and_depth_put_each_blob_on_its_marker_and_merged_blobs_on_
     assert out.depth[5] == pytest.approx(z[0, 0] + 0.002)
     (same,) = corrected([det], truth, LAYOUT, uv, "as detected", np.random.default_rng(0), F)
     assert same is det
+
+
+def test_a_blob_three_lined_up_markers_share_is_made_their_mean():
+    """Three knuckles lined up (10 px discs, 7.5 and 5 px apart) in one blob at their mean: the
+    outer two are more than a radius from it, and all three are the blob."""
+    layout = SimpleNamespace(points=LAYOUT.points.copy())
+    layout.points[3] = [-0.011, 0.07, 0.0]
+    layout.points[5] = [-0.026, 0.07, 0.0]
+    truth = _truth([FACING])
+    uv, z = _true_uv(truth, layout)
+    mean = uv[0, 3:].mean(axis=0)
+    radius = F * 0.006 / 0.6
+    assert min(np.linalg.norm(uv[0, [3, 5]] - mean, axis=1)) > radius
+    det = Detections(0.0, np.vstack([uv[0, :3], mean + [0.4, -0.2]]), z[0, :4] + 0.003)
+    (out,) = corrected([det], truth, layout, uv, "pixels and depth exact",
+                       np.random.default_rng(0), F)
+    np.testing.assert_allclose(out.uv[3], mean)
+    assert out.depth[3] == pytest.approx(z[0, 3:].mean())
 
 
 def test_exact_pixels_where_the_hand_turns_away_leaves_the_facing_frames_alone():
