@@ -8,7 +8,8 @@ a blob two or three overlapping markers share stands for their mean, as the trac
 given
 - their marker's true depth ("depth exact": the layout's marker at the true pose, so the MCP
   markers' skin slide is left out of it), or the true depth plus white noise of the filter's own
-  depth model ("depth drawn from the model": Nguyen et al.'s sigma, ``MeasurementNoise``);
+  depth model ("depth drawn from the model": Nguyen et al.'s sigma at the angle the marker is
+  seen at, ``MeasurementNoise``);
 - their marker's true image position ("pixels exact"), everywhere or only where the back of the
   hand turns away from the camera (cosine between its normal and the line of sight below
   OBLIQUE_COS: the extremes of pronation and extension, where a range of motion is decided);
@@ -37,7 +38,6 @@ import numpy as np
 
 from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, Row, online, recorded_detections, score
 from benchmarks.robustness import _truth_markers, render_condition
-from wristtrack.depth_noise import depth_sigma_nguyen
 from wristtrack.detect.detections import Detections
 from wristtrack.hand import marker_image_diameter
 from wristtrack.tracking.observation import MeasurementNoise
@@ -52,6 +52,7 @@ MATCH_PX = 3.0  # a blob this near a marker's true image position is that marker
 # mean of three, and "exact" pixels lost the track at the extremes of the movement.)
 VISIBLE = 0.5  # a marker half seen or more gets a model-drawn blob
 OBLIQUE_COS = 0.7
+_DEPTH_MODEL = MeasurementNoise()  # the default filter's depth sigma
 MODEL_PIXEL_SIGMA = 0.015  # px: sharp rendered blobs against the truth (tracking/pixel_noise.py)
 
 AS_DETECTED = "as detected"
@@ -111,7 +112,8 @@ def corrected(detections: list[Detections], truth, layout, uv: np.ndarray, data:
                 if data in ("depth exact", "pixels and depth exact"):
                     depth[b] = z
                 elif data == "depth drawn from the model":
-                    depth[b] = z + depth_sigma_nguyen(z) * rng.standard_normal()
+                    sigma = _DEPTH_MODEL.depth_sigma(z, facing[markers].mean())
+                    depth[b] = z + sigma * rng.standard_normal()
         out.append(replace(det, uv=blob_uv, depth=depth))
     return out
 
@@ -133,15 +135,17 @@ def model_drawn(detections: list[Detections], truth, layout, uv: np.ndarray, vis
                 rng: np.random.Generator) -> list[Detections]:
     """Detections at the true poses drawn from the filter's noise model: one blob per marker
     seen (``vis`` >= VISIBLE) at its true image position plus white noise of MODEL_PIXEL_SIGMA
-    per coordinate, and its true depth plus white noise of Nguyen et al.'s sigma; no clutter,
-    no suspect blob, no depth image (so no skin patches)."""
+    per coordinate, and its true depth plus white noise of the filter's depth sigma (Nguyen et
+    al.'s, at the angle the marker is seen at); no clutter, no suspect blob, no depth image (so
+    no skin patches)."""
     out = []
     for k, det in enumerate(detections):
-        points, _ = _markers_at(layout, truth, k)
+        points, facing = _markers_at(layout, truth, k)
         seen = vis[k] >= VISIBLE
         z = points[seen, 2]
         blobs = uv[k, seen] + MODEL_PIXEL_SIGMA * rng.standard_normal((int(seen.sum()), 2))
-        depth = z + depth_sigma_nguyen(z) * rng.standard_normal(z.shape)
+        sigma = _DEPTH_MODEL.depth_sigma(z, facing[seen])
+        depth = z + sigma * rng.standard_normal(z.shape)
         out.append(replace(det, uv=blobs, depth=depth, suspect=None, depth_image=None))
     return out
 

@@ -119,11 +119,12 @@ def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:
     f.P = np.eye(12) * 1e-4
     f.Q = np.eye(12) * 1e-6
     obs = MarkerObservation(camera, pts, R_c0, t_c0, ConstantRateModel.pose, True)
+    at_w0 = ConstantRateModel.initial_state(np.eye(3), *np.zeros((3, 3)))  # the noise's pose
     times = []
     for fr in frames[1:]:
         order = np.argsort(fr.labels)
         z = np.column_stack((fr.detections.uv, fr.detections.depth))[order].reshape(-1)
-        f.R = np.diag(obs.noise_variance(z))
+        f.R = np.diag(obs.noise_variance(at_w0, z))
         start = time.perf_counter()
         f.predict()
         f.update(z)

@@ -170,8 +170,9 @@ class StoneSoupTracker:
 
         prediction = self.predictor.predict(self.track[-1], timestamp=when)
         expected = self._expected(prediction.state_vector, obs)
-        y_pred = obs(np.asarray(prediction.state_vector, float).T)[0]
-        var = obs.noise_variance(y_pred).reshape(obs.n_markers, k)
+        x_pred = np.asarray(prediction.state_vector, float)[:, 0]
+        y_pred = obs(x_pred[None])[0]
+        var = obs.noise_variance(x_pred, y_pred).reshape(obs.n_markers, k)
         labels = np.full(det.count, -1)
         n_assoc = 0
         for j in np.flatnonzero(expected):

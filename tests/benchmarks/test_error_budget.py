@@ -102,3 +102,22 @@ def test_model_drawn_blobs_sit_on_the_seen_markers_with_the_stated_noise():
     assert np.std(err) == pytest.approx(0.015, rel=0.05)
     zerr = (np.stack([d.depth for d in out]) - z[:, :5]) / depth_sigma_nguyen(z[:, :5])
     assert np.std(zerr) == pytest.approx(1.0, abs=0.05)
+
+
+def test_model_drawn_depth_on_a_hand_turned_edge_on_has_nguyens_oblique_sigma():
+    """Turned 75 deg about its X axis: sigma = Nguyen's facing sigma + 1e-4 theta^2 /
+    (sqrt(z) (pi/2 - theta)^2), theta each marker's angle to its line of sight (worked out
+    here, 2-3x the facing sigma)."""
+    c, s_ = np.cos(np.radians(75.0)), np.sin(np.radians(75.0))
+    turned = FACING @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s_], [0.0, s_, c]])
+    truth = _truth([turned] * 300)
+    uv, z = _true_uv(truth)
+    dets = [Detections(float(k), np.zeros((0, 2)), np.zeros(0)) for k in range(300)]
+    out = model_drawn(dets, truth, LAYOUT, uv, np.ones((300, 6)), np.random.default_rng(3))
+    pts = np.einsum("ij,mj->mi", turned, LAYOUT.points) + [0.0, 0.0, 0.6]
+    theta = np.arccos(-(pts @ turned[:, 2]) / np.linalg.norm(pts, axis=1))
+    assert np.all(theta > np.radians(60.0))
+    sigma = depth_sigma_nguyen(z[0]) + 1e-4 * theta**2 / (np.sqrt(z[0]) * (np.pi / 2 - theta) ** 2)
+    assert np.all(sigma > 2.0 * depth_sigma_nguyen(z[0]))
+    zerr = (np.stack([d.depth for d in out]) - z) / sigma
+    assert np.std(zerr) == pytest.approx(1.0, abs=0.05)

@@ -50,11 +50,12 @@ def _initialised_tracker(seed: int) -> Tracker:
     return tracker
 
 
-def _random_frame(rng, obs):
+def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0)):
     """A random state, covariance and interval, and blobs of markers near the prediction with
-    misses, clutter and sometimes a blob crowding a marker (two markers then may want one)."""
+    misses, clutter and sometimes a blob crowding a marker (two markers then may want one).
+    ``turn``: a rotation vector (W0 axes) the random orientation is drawn about."""
     scales = np.repeat([3e-4, 4e-6, 2.5e-3, 0.09], 3)  # rad^2, m^2, (m/s)^2, (rad/s)^2
-    R = Rotation.from_rotvec(rng.normal(0, 0.3, 3)).as_matrix()
+    R = Rotation.from_rotvec(np.asarray(turn) + rng.normal(0, 0.3, 3)).as_matrix()
     x = ConstantRateModel.initial_state(
         R, rng.normal(0, 0.03, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1.0, 3)
     )
@@ -111,6 +112,33 @@ def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
             assert np.isnan(nis) and np.isnan(nis_g)
     # both outcomes exercised: most frames compiled, clashing markers declined to the solver
     assert outcomes[compiled.OK] > 250 and outcomes[compiled.DECLINED] > 20
+
+
+def test_compiled_step_equals_the_generic_step_with_the_hand_turned_edge_on(step):
+    """The back of the hand turned 60-80 deg from the line of sight: the markers' depth noise
+    grows as Nguyen et al. measured (depth_noise.oblique_sigma), in both paths alike."""
+    tracker = _initialised_tracker(seed=7)
+    obs = tracker._observation(True)
+    cfg = tracker.config
+    args = compiled.frame_constants(tracker.model, obs, cfg.ukf, cfg.facing_cos,
+                                    tracker.assoc_params)  # fmt: skip
+    rng = np.random.default_rng(9)
+    oblique = 0
+    for _ in range(150):
+        det, x, P, dt = _random_frame(rng, obs, turn=(0.0, 1.2, 0.0))
+        code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth,
+                                                     _blob_var(obs, det), *args)
+        x_g, P_g, labels_g, n_g, nis_g, dof_g, _ = tracker._generic_frame(
+            det, _Track(x, P, 0.0), dt)
+        if code == compiled.DECLINED or n_pairs == 0:
+            continue
+        z = obs(x[None])[0].reshape(6, 3)[:, 2]
+        facing_sd = obs.noise.depth_sigma(z)
+        oblique += np.any(np.sqrt(obs.noise_variance(x, obs(x[None])[0])[2::3]) > facing_sd)
+        np.testing.assert_array_equal(labels, labels_g)
+        assert _close(x_c, x_g) and _close(P_c, P_g)
+        assert nis == pytest.approx(nis_g, rel=REL)
+    assert oblique > 40  # frames updated with some marker seen beyond 60 deg
 
 
 def test_compiled_step_declines_what_only_the_generic_path_handles(step):

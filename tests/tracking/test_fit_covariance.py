@@ -40,7 +40,7 @@ def test_fit_covariance_is_the_information_form_posterior():
         d[i] = 1e-6
         J[:, i] = (obs(model.retract(x, d[None]))[0] - obs(model.retract(x, -d[None]))[0]) / 2e-6
     order = np.concatenate([np.arange(j * 3, j * 3 + 3) for j in (3, 0, 1, 2, 4, 5)])
-    Rn = np.diag(obs.noise_variance(obs(x[None])[0])) + obs.shared_covariance(x)
+    Rn = np.diag(obs.noise_variance(x, obs(x[None])[0])) + obs.shared_covariance(x)
     P0 = generic_step.fit_covariance(model, obs, x, Detections(0.0, np.zeros((0, 2)),
                                                                  np.zeros(0)), labels[:0], config)
     Jo, Ro = J[order], Rn[np.ix_(order, order)]

@@ -38,7 +38,7 @@ def test_two_blobs_of_one_marker_are_independent_measurements():
     z = np.vstack((y, y[2] + [0.8, -0.7, 0.002])) + rng.normal(0, 1, (7, 3)) * [0.3, 0.3, 1e-3]
     det = Detections(1.0, z[:, :2].copy(), z[:, 2].copy())
     labels = np.array([0, 1, 2, 3, 4, 5, 2])
-    own, shared = obs.noise_variance(pred.y), obs.shared_covariance(x)
+    own, shared = obs.noise_variance(x, pred.y), obs.shared_covariance(x)
     cfg = tracker.config
     both = _labelled_update(tracker.model, obs, (x, P), pred, (own, shared), det, z, labels,
                             cfg, 0)
@@ -69,7 +69,7 @@ def test_without_a_shared_marker_the_update_is_the_full_covariance_one():
     z = y + rng.normal(0, 1, (6, 3)) * [0.3, 0.3, 1e-3]
     det = Detections(1.0, z[:, :2].copy(), z[:, 2].copy())
     labels = np.array([3, 1, -1, 0, 5, 4])
-    own, shared = obs.noise_variance(pred.y), obs.shared_covariance(x)
+    own, shared = obs.noise_variance(x, pred.y), obs.shared_covariance(x)
     res = _labelled_update(tracker.model, obs, (x, P), pred, (own, shared), det, z, labels,
                            tracker.config, 0)
     A, values, blob, component = measurement_map(labels, z, 3, 6)

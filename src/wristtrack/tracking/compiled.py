@@ -32,6 +32,7 @@ from wristtrack.tracking.kernel import (
     _CY,
     _DEPTH_COEFF,
     _DEPTH_FLOOR,
+    _DEPTH_OBLIQUE,
     _DEPTH_OFFSET,
     _DEPTH_Z0,
     _FACING_COS,
@@ -84,6 +85,7 @@ def frame_constants(
     par[_PIXEL_VAR] = noise.pixel_sigma**2
     par[_DEPTH_COEFF], par[_DEPTH_FLOOR] = noise.depth_coeff, noise.depth_floor
     par[_DEPTH_OFFSET], par[_DEPTH_Z0] = noise.depth_offset, noise.depth_z0
+    par[_DEPTH_OBLIQUE] = noise.depth_oblique
     par[_SQRT_QA] = math.sqrt(process.linear_accel)
     par[_SQRT_QW] = math.sqrt(process.angular_accel)
     par[_FACING_COS] = facing_cos

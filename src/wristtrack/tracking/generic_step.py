@@ -50,7 +50,7 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
         model, x, P, dt, model.process_noise(dt), obs, params=config.ukf
     )
     prior = (x, P)
-    own = obs.noise_variance(pred.y)
+    own = obs.noise_variance(x, pred.y)
     shared = obs.shared_covariance(x)
     expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
 
@@ -111,7 +111,7 @@ def fit_covariance(model, obs: MarkerObservation, x: np.ndarray, det: Detections
     pose = np.diag([_FIT_PRIOR_ROT**2] * 3 + [_FIT_PRIOR_POS**2] * 3)
     P = model.initial_covariance(pose)
     pred = ukf.predict_measurement(model, x, P, obs, config.ukf)
-    noise = (obs.noise_variance(pred.y), obs.shared_covariance(x))
+    noise = (obs.noise_variance(x, pred.y), obs.shared_covariance(x))
     z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
     # Linearised over the wide prior, h's curvature there counts as noise (rotation sigmas
     # 1.5x too wide on a tilted hand): linearise it over the posterior instead.

@@ -16,7 +16,7 @@ the generic path has a branch this does not copy: a covariance that is not posit
 both: tracking/merged.py). The tracker then runs the generic path on the same frame.
 
 The quaternion helpers are geometry's (``*_into``) and the depth noise is
-depth_noise.depth_sigma: compiled.py compiles those very functions with these.
+depth_noise.depth_sigma and oblique_sigma: compiled.py compiles those very functions with these.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from wristtrack.depth_noise import depth_sigma
+from wristtrack.depth_noise import depth_sigma, oblique_sigma
 from wristtrack.geometry import (
     quat_exp_into,
     quat_mul_into,
@@ -40,8 +40,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
-    _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _N_PAR,
-) = range(21)  # fmt: skip
+    _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _N_PAR,
+) = range(22)  # fmt: skip
 
 
 # ------------------------------------------------------------------------ small helpers
@@ -121,11 +121,12 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
     q = np.empty(4)  # the predicted orientation, pvw its p, v, w
     pvw = np.empty(9)
     _predicted(x, dt, mean[m:], qs, qc, q, pvw)
-    if not _all_visible(q, pvw, layout, R_c0, t_c0, par):
+    facing = np.empty(layout.shape[0])
+    if not _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
         return DECLINED, x_out, P_out, labels, 0, np.nan
 
     # associate
-    _add_noise(C, mean, layout.shape[0], par)  # C's measurement block: Pyy + each blob's noise
+    _add_noise(C, mean, facing, par)  # C's measurement block: Pyy + each blob's noise
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
     if n_pairs < 0 or _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
@@ -273,8 +274,9 @@ def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
         tc[i] = R_c0[i, 0] * pvw[0] + R_c0[i, 1] * pvw[1] + R_c0[i, 2] * pvw[2] + t_c0[i]
 
 
-def _all_visible(q, pvw, layout, R_c0, t_c0, par):
-    """generic_step.expected_markers for all markers: in front, facing the camera, on the sensor."""
+def _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
+    """generic_step.expected_markers for all markers: in front, facing the camera, on the
+    sensor; ``facing`` (J,) gets the cosines between the hand's normal and their lines of sight."""
     Rc = np.empty((3, 3))
     tc = np.empty(3)
     _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
@@ -285,10 +287,11 @@ def _all_visible(q, pvw, layout, R_c0, t_c0, par):
         Z = Rc[2, 0] * a + Rc[2, 1] * b + Rc[2, 2] * c + tc[2]
         if not Z > 0:
             return False
-        facing = -(X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]) / math.sqrt(X * X + Y * Y + Z * Z)
+        facing[j] = -(X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]) / math.sqrt(X * X + Y * Y + Z * Z)
         u = X / Z * par[_FX] + par[_CX]
         v = Y / Z * par[_FY] + par[_CY]
-        if not (facing > par[_FACING_COS] and -0.5 <= u < par[_U_MAX] and -0.5 <= v < par[_V_MAX]):
+        if not (facing[j] > par[_FACING_COS] and -0.5 <= u < par[_U_MAX]
+                and -0.5 <= v < par[_V_MAX]):
             return False
     return True
 
@@ -318,13 +321,16 @@ def _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
     return False
 
 
-def _add_noise(C, mean, J, par):
-    """MarkerObservation.noise_variance added to the measurement block's diagonal."""
+def _add_noise(C, mean, facing, par):
+    """MarkerObservation.noise_variance added to the measurement block's diagonal, the markers
+    seen at ``facing`` (cosines, _all_visible's)."""
+    J = facing.shape[0]
     for i in range(2 * J):
         C[i, i] += par[_PIXEL_VAR]
     for j in range(J):
-        sd = depth_sigma(mean[2 * J + j], par[_DEPTH_COEFF], par[_DEPTH_FLOOR],
-                         par[_DEPTH_OFFSET], par[_DEPTH_Z0])
+        z = mean[2 * J + j]
+        sd = depth_sigma(z, par[_DEPTH_COEFF], par[_DEPTH_FLOOR], par[_DEPTH_OFFSET],
+                         par[_DEPTH_Z0]) + oblique_sigma(z, facing[j], par[_DEPTH_OBLIQUE])
         C[2 * J + j, 2 * J + j] += sd * sd
 
 
@@ -485,7 +491,7 @@ def _write_state(q, pvw, out):
 # the functions ``step`` calls, compiled under these names before it (compiled._jit)
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
-    "depth_sigma", "_cholesky", "_forward", "_sigma_points", "_moments", "_predicted",
-    "_camera_pose", "_all_visible", "_may_merge", "_add_noise", "_add_shared_noise",
-    "_associate", "_correct", "_write_state",
+    "depth_sigma", "oblique_sigma", "_cholesky", "_forward", "_sigma_points", "_moments",
+    "_predicted", "_camera_pose", "_all_visible", "_may_merge", "_add_noise",
+    "_add_shared_noise", "_associate", "_correct", "_write_state",
 )  # fmt: skip
