@@ -10,11 +10,12 @@ import pytest
 
 from wristtrack.camera import Camera
 from wristtrack.cli import main
-from wristtrack.depth_noise import depth_sigma_nguyen
+from wristtrack.depth_noise import depth_sigma_nguyen, oblique_sigma
 from wristtrack.errors import ConfigError
 from wristtrack.hand import MARKER_NAMES, HandLayout
 from wristtrack.io.poses import read_poses
 from wristtrack.sim import realism
+from wristtrack.sim.depth_sensor import NOISE_PAD, DepthSensor
 from wristtrack.sim.hand_model import MARKER_RADIUS
 from wristtrack.sim.motion import still
 from wristtrack.sim.renderer import Renderer
@@ -110,6 +111,45 @@ def test_axial_noise_is_nguyens_and_spatially_correlated(structured):
     # most of it.
     blocks = np.nanmean(res.reshape(13, 9, 15, 9), axis=(1, 3))
     assert np.nanstd(blocks) / sigma > 0.4
+
+
+def _tilted_plane_noise(scene, degrees: float, seed: int = 0) -> tuple[float, float]:
+    """(depth at the image centre (m), residual sd (m) about the plane) of structured-light
+    depth of a plane 0.7 m away turned ``degrees`` about the vertical axis, read in a band
+    around the image centre (where the line of sight is the optical axis)."""
+    cam = scene.camera
+    H, W = cam.height, cam.width
+    a = np.radians(degrees)
+    normal = np.array([np.sin(a), 0.0, -np.cos(a)])  # towards the camera
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    rays = np.dstack(((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones((H, W))))
+    z = (normal @ np.array([0.0, 0.0, 0.7])) / (rays @ normal)  # depth where each ray meets it
+    rng = np.random.default_rng(seed)
+    bank = rng.standard_normal((2, H + NOISE_PAD, W + NOISE_PAD), dtype=np.float32)
+    sensor = DepthSensor(scene, z, bank, rng, np.random.default_rng([seed, 4]))
+    raw = sensor.capture(np.empty((0, 0)), (0, 0, 0, 0)).astype(float) * cam.depth_scale
+    band = (slice(int(cam.cy) - 40, int(cam.cy) + 40), slice(int(cam.cx) - 25, int(cam.cx) + 25))
+    ok = raw[band] > 0
+    return 0.7, float(np.std((raw[band] - z[band])[ok]))
+
+
+def test_axial_noise_grows_where_the_surface_is_seen_obliquely(structured):
+    """Nguyen et al.'s axial noise against the angle between the surface and the line of sight:
+    the same up to 60 deg, then + 1e-4 theta^2 / (sqrt(z) (pi/2 - theta)^2) (worked out here)."""
+    (r, _), _ = structured
+    scene = r.scene
+    facing = np.mean([_tilted_plane_noise(scene, 20.0, s)[1] for s in range(3)])
+    z = 0.7
+    assert facing == pytest.approx(depth_sigma_nguyen(z), rel=0.2)
+    for degrees in (70.0, 75.0):
+        theta = np.radians(degrees)
+        extra = 1e-4 * theta**2 / (np.sqrt(z) * (np.pi / 2 - theta) ** 2)
+        assert oblique_sigma(z, np.cos(theta)) == pytest.approx(extra)
+        # the sd across the band: the matching window's correlated noise, the lateral jitter
+        # over the slope and the disparity steps around the axial sigma
+        measured = np.mean([_tilted_plane_noise(scene, degrees, s)[1] for s in range(3)])
+        assert measured == pytest.approx(depth_sigma_nguyen(z) + extra, rel=0.3)
+    assert measured > 2.5 * facing
 
 
 def test_depth_is_misregistered_by_one_to_two_pixels(structured):

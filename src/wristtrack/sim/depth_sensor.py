@@ -5,8 +5,9 @@ a few pixels, whole millimetres, no reading at depth edges, in the projector's s
 random speckles) is kept exactly as it was, so older figures stay comparable. The
 ``structured_light`` effect is a Kinect v1 / Xtion as measured (see
 :mod:`wristtrack.sim.realism`): Nguyen et al.'s axial noise correlated over the 9x9 matching
-window, lateral jitter, disparity quantised to 1/8 px, the registered map's invalid border, and a
-1-2 px misregistration with the colour image.
+window and their lateral jitter at depth edges, both growing where the surface is seen
+obliquely; disparity quantised to 1/8 px, the registered map's invalid border, and a 1-2 px
+misregistration with the colour image.
 """
 
 from __future__ import annotations
@@ -14,7 +15,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from wristtrack.depth_noise import depth_sigma, depth_sigma_nguyen
+from wristtrack.depth_noise import (
+    depth_sigma,
+    depth_sigma_nguyen,
+    lateral_sigma_nguyen,
+    oblique_sigma,
+)
 from wristtrack.sim import realism
 from wristtrack.sim.scenes import Scene
 
@@ -134,6 +140,11 @@ class DepthSensor:
         self.sl_bank /= self.sl_bank.std(axis=(1, 2), keepdims=True)
         self.grid_x, self.grid_y = np.meshgrid(np.arange(W, dtype=np.float32),
                                                np.arange(H, dtype=np.float32))
+        # each pixel's line of sight (z = 1), for the angle the surface is seen at
+        xy = self.cam.normalize(np.stack((self.grid_x, self.grid_y), axis=-1))
+        self.sl_rays = np.concatenate((xy, np.ones((H, W, 1))), axis=-1).astype(np.float32)
+        self.sl_bg_cos = _incidence_cos(np.where(np.isfinite(self.bg_z), self.bg_z, 0.0),
+                                        self.sl_rays)
         # The registered map's border, as measured on real OpenNI frames (see realism).
         border = np.zeros((H, W), bool)
         border[:realism.BORDER_TOP] = True
@@ -157,12 +168,21 @@ class DepthSensor:
             oy, ox = (int(v) for v in r.integers(NOISE_PAD, size=2))
             return self.sl_bank[i, oy:oy + H, ox:ox + W]
 
-        # Lateral jitter of where each window's depth comes from (depth edges wander).
-        s = np.float32(realism.LATERAL_JITTER_PX)
-        z = cv2.remap(z, self.grid_x + s * bank(0), self.grid_y + s * bank(1), cv2.INTER_NEAREST,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        # The angle each pixel's surface is seen at (the clean depth's), in the re-rendered
+        # region and a pixel around it; the static background's is computed once.
+        cos = self.sl_bg_cos.copy()
+        a0, b0, a1, b1 = max(x0 - 1, 0), max(y0 - 1, 0), min(x1 + 1, W), min(y1 + 1, H)
+        if a1 - a0 > 1 and b1 - b0 > 1:
+            cos[b0:b1, a0:a1] = _incidence_cos(z[b0:b1, a0:a1], self.sl_rays[b0:b1, a0:a1])
+        # Depth edges wander: lateral jitter of where the windows near an edge take their depth
+        # from. (Not elsewhere: on a slope it would read as axial noise, which Nguyen et al.'s
+        # axial sigma, measured on sloped planes, already is.)
+        s = lateral_sigma_nguyen(cos).astype(np.float32)
+        jittered = cv2.remap(z, self.grid_x + s * bank(0), self.grid_y + s * bank(1),
+                             cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        z = np.where(_near_edges(z), jittered, z)
         valid = z > 0
-        zn = z + depth_sigma_nguyen(z) * bank(2)
+        zn = z + (depth_sigma_nguyen(z) + oblique_sigma(z, cos)).astype(np.float32) * bank(2)
         # Disparity quantised to 1/8 px: depth takes only the values fb / (n / 8).
         with np.errstate(divide="ignore"):
             d = realism.FOCAL_BASELINE / zn
@@ -178,6 +198,28 @@ class DepthSensor:
         out = np.clip(raw, 0, 65535).astype(np.uint16) * keep
         dx, dy = self.sl_shift
         return np.roll(out, (dy, dx), axis=(0, 1)) * _inside(H, W, dx, dy)
+
+
+def _near_edges(z: np.ndarray, reach_px: int = 3) -> np.ndarray:
+    """(H, W) bool: within ``reach_px`` of a depth edge (a jump of more than EDGE_JUMP_M between
+    neighbours, or to no surface) of the clean depth ``z`` (0: no surface)."""
+    kernel = np.ones((3, 3), np.uint8)
+    edge = (cv2.dilate(z, kernel) - cv2.erode(z, kernel)) > realism.EDGE_JUMP_M
+    return cv2.dilate(edge.astype(np.uint8), np.ones((2 * reach_px + 1,) * 2, np.uint8)) > 0
+
+
+def _incidence_cos(z: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """(H, W) cosine between the surface's normal and the line of sight at each pixel of the
+    depth map ``z`` (H, W), m (0: no surface), ``rays`` (H, W, 3) the lines of sight (z = 1):
+    the normal from the back-projected points' differences to the neighbouring pixels. Across a
+    depth edge it is near 0, the steepest angle (such pixels mostly read nothing anyway)."""
+    X = z[..., None] * rays
+    n = np.cross(np.gradient(X, axis=1), np.gradient(X, axis=0))
+    dot = np.abs(np.einsum("ijk,ijk->ij", n, X))
+    norm = np.linalg.norm(n, axis=-1) * np.linalg.norm(X, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.where(norm > 0, dot / norm, 1.0)
+    return cos.astype(np.float32)
 
 
 def _inside(H: int, W: int, dx: int, dy: int) -> np.ndarray:

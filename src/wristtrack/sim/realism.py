@@ -29,10 +29,12 @@ devices and the literature (``../shared/realdata/README.md``), not tuned to the 
   of the light, a lamp of 0.15 rad angular radius: a near-saturated spot on the marker.
 - ``structured_light``: Kinect v1 / Xtion depth: axial noise sigma_z = 0.0012 + 0.0019
   (z - 0.4)^2 m (Nguyen, Izadi & Lovell 2012) correlated over the 9x9 px matching window,
-  lateral jitter 0.8 px, disparity quantised to 1/8 px (depth steps 2.85e-3 z^2 m), holes at
-  depth edges and in the projector's shadow, the registered depth map's invalid border as
-  measured on real OpenNI frames (top 15, bottom 5, right 31 rows/columns, a ragged left band
-  ~15 px), and colour-depth misregistration of 1-2 px.
+  lateral jitter 0.8 px at depth edges, both growing as Nguyen et al. measured where the surface
+  is seen more than 60 deg from its normal (+1.5 mm at 70 deg at arm's length: a hand turned
+  edge-on), disparity quantised to 1/8 px (depth steps 2.85e-3 z^2 m), holes at depth edges
+  and in the projector's shadow, the registered depth map's invalid border as measured on real
+  OpenNI frames (top 15, bottom 5, right 31 rows/columns, a ragged left band ~15 px), and
+  colour-depth misregistration of 1-2 px.
 
 Without any effect the plain scenarios render exactly as before (Kinect depth noise
 1.425e-3 z^2, flat layout, no distortion), so older figures stay comparable.
@@ -92,7 +94,6 @@ HIGHLIGHT_PEAK = 230.0
 DISPARITY_STEP_PX = 1.0 / 8.0
 FOCAL_BASELINE = 1.0 / (8.0 * 2.85e-3)  # px m: 1/8 px disparity = 2.85e-3 z^2 m
 MATCH_WINDOW_PX = 9
-LATERAL_JITTER_PX = 0.8
 BORDER_TOP, BORDER_BOTTOM, BORDER_RIGHT, BORDER_LEFT_RAMP = 15, 5, 31, 15
 EDGE_JUMP_M = 0.012
 
