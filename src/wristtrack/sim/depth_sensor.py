@@ -78,9 +78,8 @@ class DepthSensor:
         """
         with np.errstate(invalid="ignore"):
             zc = np.where(np.isfinite(z), z, 1e3).astype(np.float32)
-            kernel = np.ones((3, 3), np.uint8)
-            edge = (cv2.dilate(zc, kernel) - cv2.erode(zc, kernel)) > realism.EDGE_JUMP_M
-            ragged = cv2.dilate(edge.astype(np.uint8), kernel) > 0
+            edge = _depth_edges(zc)
+            ragged = cv2.dilate(edge.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
             h, w = z.shape
             oy, ox = (int(v) for v in self.rng.integers(NOISE_PAD, size=2))
             coin = self.bank[1, y0 + oy:y0 + oy + h, x0 + ox:x0 + ox + w] > 0.25
@@ -203,9 +202,15 @@ class DepthSensor:
 def _near_edges(z: np.ndarray, reach_px: int = 3) -> np.ndarray:
     """(H, W) bool: within ``reach_px`` of a depth edge (a jump of more than EDGE_JUMP_M between
     neighbours, or to no surface) of the clean depth ``z`` (0: no surface)."""
-    kernel = np.ones((3, 3), np.uint8)
-    edge = (cv2.dilate(z, kernel) - cv2.erode(z, kernel)) > realism.EDGE_JUMP_M
+    edge = _depth_edges(z)
     return cv2.dilate(edge.astype(np.uint8), np.ones((2 * reach_px + 1,) * 2, np.uint8)) > 0
+
+
+def _depth_edges(z: np.ndarray) -> np.ndarray:
+    """(H, W) bool: where the depth ``z`` (m, float32) jumps by more than EDGE_JUMP_M within a
+    pixel's 3x3 neighbourhood."""
+    kernel = np.ones((3, 3), np.uint8)
+    return (cv2.dilate(z, kernel) - cv2.erode(z, kernel)) > realism.EDGE_JUMP_M
 
 
 def _incidence_cos(z: np.ndarray, rays: np.ndarray) -> np.ndarray:

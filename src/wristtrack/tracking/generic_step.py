@@ -41,9 +41,9 @@ class StepResult(NamedTuple):
 
 def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt: float,
                  det: Detections, config: TrackerConfig, assoc_params: assoc.AssociationParams,
-                 camera: Camera, R_c0: np.ndarray, iterations: int = 0) -> StepResult:
+                 camera: Camera, iterations: int = 0) -> StepResult:
     """The step of state model ``model`` from (x, P) over ``dt`` s with the blobs ``det``,
-    measured by ``obs`` (with depth or colour alone), W0's rotation ``R_c0``; the one-to-one
+    measured by ``obs`` (with depth or colour alone, W0 its own); the one-to-one
     update corrected ``iterations`` more times over its posterior (ukf.iterated_update)."""
     k = obs.k
     x, P, pred = ukf.predict_with_measurement(
@@ -52,7 +52,7 @@ def generic_step(model, obs: MarkerObservation, x: np.ndarray, P: np.ndarray, dt
     prior = (x, P)
     own = obs.noise_variance(x, pred.y)
     shared = obs.shared_covariance(x)
-    expected = expected_markers(model, obs, x, R_c0, camera, config.facing_cos)
+    expected = expected_markers(obs, x, camera, config.facing_cos)
 
     n_markers = obs.n_markers
     y_hat = pred.y.reshape(n_markers, k)[expected]
@@ -163,15 +163,12 @@ def _blob_variance(obs: MarkerObservation, det: Detections, blob: np.ndarray,
     return added
 
 
-def expected_markers(model, obs: MarkerObservation, x: np.ndarray, R_c0: np.ndarray,
-                     camera: Camera, facing_cos: float) -> np.ndarray:
+def expected_markers(obs: MarkerObservation, x: np.ndarray, camera: Camera,
+                     facing_cos: float) -> np.ndarray:
     """(6,) bool: the markers that can be seen at state ``x``: in front of the camera, on the
     sensor, the back of the hand not turned further away than ``facing_cos``."""
     pts = obs.marker_points(x[None])[0]
-    R_rel, _ = model.pose(x[None])
-    normal = R_c0 @ R_rel[0, :, 2]
-    facing = -(pts @ normal) / np.sqrt(np.einsum("ij,ij->i", pts, pts))
-    ok = (facing > facing_cos) & (pts[:, 2] > 0)
+    ok = (obs.facing(x) > facing_cos) & (pts[:, 2] > 0)
     return ok & camera.in_image(camera.project(pts))
 
 

@@ -182,10 +182,14 @@ class MarkerObservation:
         var = np.full((self.n_markers, self.k), self.noise.pixel_sigma**2)
         if self.k == 3:
             z = y_pred.reshape(self.n_markers, 3)[:, 2]
-            R_ch, pts = self._hand_in_camera(x)
-            facing = -(pts @ R_ch[:, 2]) / np.linalg.norm(pts, axis=1)
-            var[:, 2] = self.noise.depth_sigma(z, facing) ** 2
+            var[:, 2] = self.noise.depth_sigma(z, self.facing(x)) ** 2
         return var.reshape(-1)
+
+    def facing(self, x: np.ndarray) -> np.ndarray:
+        """(6,) cosine between the back of the hand's normal and each marker's line of sight
+        at state ``x`` (D,): 1 facing the camera, 0 edge-on, negative turned away."""
+        R_ch, pts = self._hand_in_camera(x)
+        return -(pts @ R_ch[:, 2]) / np.linalg.norm(pts, axis=1)
 
     def slide_jacobian(self, x: np.ndarray) -> np.ndarray:
         """(6*k, 3) change of the measurements at state ``x`` (D,) per standard deviation of the

@@ -424,8 +424,7 @@ class Tracker:
         """Any configuration, any frame: generic_step.StepResult as a tuple."""
         obs = self._observation(self.config.use_depth and det.depth is not None)
         return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
-                                  self.assoc_params, self.camera, self.R_c0,
-                                  self._gap_iterations(dt)))
+                                  self.assoc_params, self.camera, self._gap_iterations(dt)))
 
     def _gap_iterations(self, dt: float) -> int:
         """How many times a step of ``dt`` s iterates its update: after a gap (LONG_GAP_S),
