@@ -31,6 +31,11 @@ REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 KTK = REALDATA / "kineticstoolkit"
 SLOW = {"speed": 0.3, "position_scale": 0.2, "rotation_scale": 0.2}
 MAP = "WRIST=WRIST,CMC1=CMC1,MCP2=MCP2,MCP3=MCP3,MCP4=MCP4,MCP5=MCP5"
+# The reference low-passed as labs do (`compare --lowpass`) at half our 30 fps: the fastest
+# motion the tracked frames resolve. Not lower: a 6 Hz cutoff removed fast motion the tracker
+# follows, and the tennis toss agreed better with it than with its own truth (0.16 against
+# 0.235 deg orientation RMSE).
+LOWPASS_HZ = 15.0
 
 
 def _motions(quick: bool) -> dict[str, tuple[str, str, dict[str, Any]]]:
@@ -98,7 +103,8 @@ def round_trip(cache: Path, name: str, file: str, cluster: str, options: dict,
         return out
     out["evaluate"] = evaluate(run / "poses.csv", rec / "truth.csv")
     given = {"time_offset_s": out["planted"]["time_offset_s"]} if offset_given else {}
-    for mode, kw in (("markers", {"markers": MAP}), ("cluster", {"cluster": cluster})):
+    for mode, kw in (("markers", {"markers": MAP}), ("cluster", {"cluster": cluster}),
+                     ("lowpass", {"markers": MAP, "lowpass_hz": LOWPASS_HZ})):
         try:
             out[mode] = compare(run, rec / "reference.c3d", **kw, **given).result
         except WristtrackError as exc:
@@ -119,9 +125,10 @@ def _trip_rows(trips: list[dict]) -> list[str]:
     ]
     for trip in trips:
         p, ev = trip["planted"], trip.get("evaluate")
-        for mode in ("markers", "cluster"):
+        for mode in ("markers", "lowpass", "cluster"):
             r = trip.get(mode)
-            label = "our 6 markers" if mode == "markers" else "the cluster"
+            label = {"markers": "our 6 markers", "cluster": "the cluster",
+                     "lowpass": f"our 6 markers, {LOWPASS_HZ:g} Hz low-pass"}[mode]
             if r is None or "error" in r:
                 why = "tracking failed" if r is None else r["error"]
                 rows.append(f"| {trip['name']} | {label} | - | {why} | | | | | | |")
@@ -218,6 +225,50 @@ def real_file_rows() -> list[str]:
     return rows
 
 
+def _round_trip_summary(calm: list[dict], mode: str, how: str) -> tuple[dict, str]:
+    """The worst figures of the calm round trips' ``mode`` comparison against their targets,
+    and the summary line saying so."""
+    worst: dict[str, float] = {}
+    for t in calm:
+        r, p, ev = t.get(mode), t["planted"], t.get("evaluate")
+        if not r or "error" in r:
+            worst["failed"] = 1.0
+            continue
+        ang, mm = _transform_errors(r, p)
+        for key, value in (
+            ("offset_ms", abs(r["time_offset_s"] - p["time_offset_s"]) * 1e3),
+            ("rot_deg", ang), ("mm", mm),
+            ("pos_pct", abs(r["pos_rmse_mm"] / ev["position_rmse_mm"] - 1) * 100),
+            ("ori_pct", abs(r["rot_rmse_deg"] / ev["orientation_rmse_deg"] - 1) * 100),
+        ):
+            worst[key] = max(worst.get(key, 0.0), value)
+    met = ("failed" not in worst and worst["offset_ms"] <= 2 and worst["rot_deg"] <= 0.1
+           and worst["mm"] <= 0.5 and worst["pos_pct"] <= 5 and worst["ori_pct"] <= 5)
+    return worst, (
+        f"Round trip on the three calm recorded motions, our six markers in the reference {how} "
+        "(targets: offset 2 ms, transform 0.1 deg / 0.5 mm, RMSE within 5 % of `evaluate`): "
+        + ("**failed to track**" if "failed" in worst else
+           f"worst offset error {worst['offset_ms']:.2f} ms, transform {worst['rot_deg']:.3f} "
+           f"deg / {worst['mm']:.2f} mm at the hand, RMSE within {worst['pos_pct']:.1f} % "
+           f"(position) and {worst['ori_pct']:.1f} % (orientation): "
+           + ("met." if met else "**not met**."))
+    )
+
+
+def _reference_noise_deg(noise_mm: float = 0.05, draws: int = 20000) -> float:
+    """RMS orientation error (deg) of the rigid fit of the default hand layout to its markers
+    with ``noise_mm`` of noise per coordinate (drawn, fixed seed)."""
+    from scipy.spatial.transform import Rotation
+
+    from wristtrack.analysis.compare.reference import rigid_fit
+    from wristtrack.hand import HandLayout
+
+    layout = HandLayout.default().points
+    noisy = layout + np.random.default_rng(0).normal(0, noise_mm * 1e-3, (draws, *layout.shape))
+    R = rigid_fit(layout, noisy)[0]
+    return float(np.degrees(np.sqrt(np.mean(Rotation.from_matrix(R).magnitude() ** 2))))
+
+
 def validation_section(cache: Path, quick: bool = False, findings: dict | None = None
                        ) -> list[str]:
     """Markdown lines of the Validation section (see the module docstring)."""
@@ -232,33 +283,14 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
                          folder=BIOBUDDY),
               round_trip(cache, "biobuddy static pose, offset given", *static_spec,
                          offset_given=True, folder=BIOBUDDY)]
-    worst: dict[str, float] = {}
-    for t in calm:
-        r, p, ev = t.get("markers"), t["planted"], t.get("evaluate")
-        if not r or "error" in r:
-            worst["failed"] = 1.0
-            continue
-        ang, mm = _transform_errors(r, p)
-        for key, value in (
-            ("offset_ms", abs(r["time_offset_s"] - p["time_offset_s"]) * 1e3),
-            ("rot_deg", ang), ("mm", mm),
-            ("pos_pct", abs(r["pos_rmse_mm"] / ev["position_rmse_mm"] - 1) * 100),
-            ("ori_pct", abs(r["rot_rmse_deg"] / ev["orientation_rmse_deg"] - 1) * 100),
-        ):
-            worst[key] = max(worst.get(key, 0.0), value)
+    worst, summary = _round_trip_summary(calm, "markers", "as recorded")
+    worst_lp, summary_lp = _round_trip_summary(
+        calm, "lowpass", f"low-passed at {LOWPASS_HZ:g} Hz (`--lowpass {LOWPASS_HZ:g}`)")
+    noise_deg = _reference_noise_deg()
     if findings is not None:
         findings["validation"] = worst
-    met = ("failed" not in worst and worst["offset_ms"] <= 2 and worst["rot_deg"] <= 0.1
-           and worst["mm"] <= 0.5 and worst["pos_pct"] <= 5 and worst["ori_pct"] <= 5)
-    summary = (
-        "Round trip on the three calm recorded motions, our six markers in the reference "
-        "(targets: offset 2 ms, transform 0.1 deg / 0.5 mm, RMSE within 5 % of `evaluate`): "
-        + ("**failed to track**" if "failed" in worst else
-           f"worst offset error {worst['offset_ms']:.2f} ms, transform {worst['rot_deg']:.3f} "
-           f"deg / {worst['mm']:.2f} mm at the hand, RMSE within {worst['pos_pct']:.1f} % "
-           f"(position) and {worst['ori_pct']:.1f} % (orientation): "
-           + ("met." if met else "**not met**."))
-    )
+        findings["validation_lowpass"] = worst_lp
+        findings["validation_summary"] = [summary, summary_lp]
     return [
         "## Validation against a reference system",
         "",
@@ -273,6 +305,12 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "the camera origin 0.65 m away by 1.1 mm per 0.1 deg).",
         "",
         f"- {summary}",
+        f"- {summary_lp}",
+        f"- Why the two differ: 0.05 mm of marker noise is {noise_deg:.3f} deg of orientation "
+        "per frame on our six markers (their rigid fit, worked out by drawing it), which adds "
+        f"{(np.sqrt(1 + (noise_deg / 0.2) ** 2) - 1) * 100:.1f} % to a 0.2 deg RMSE: against "
+        "the raw reference the 5 % cannot be had at our accuracy. Labs low-pass their marker "
+        "data before anything is computed from it, as `compare --lowpass` does.",
         "- With only the glove's three-marker cluster, the fixed offset from our hand frame to "
         "the cluster's is unknown too and the small cluster's orientation is noisier: the "
         "results are less precise and the reported sigma says by how much.",

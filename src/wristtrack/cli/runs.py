@@ -55,7 +55,7 @@ def _compare(args: argparse.Namespace) -> int:
 
     result = compare(args.run_dir, args.reference, markers=args.markers, cluster=args.cluster,
                      fit_ratio=not args.no_clock_ratio, max_lag_s=args.max_lag,
-                     time_offset_s=args.time_offset)
+                     time_offset_s=args.time_offset, lowpass_hz=args.lowpass)
     json_path, html_path = write_comparison(args.out, result)
     print(format_comparison(result.result))
     print(f"wrote {json_path} and {html_path}")
@@ -98,5 +98,9 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     comp.add_argument("--time-offset", type=float, metavar="S",
                       help="the clocks' offset when known (synchronised systems; needed for a "
                       "static trial): reference time = our time + S, not fitted")
+    comp.add_argument("--lowpass", type=float, metavar="HZ",
+                      help="low-pass the reference's marker trajectories at HZ first, as labs "
+                      "filter motion-capture data (4th-order zero-lag Butterworth; e.g. 10); "
+                      "default: as recorded")
     comp.set_defaults(handler=_compare)
 

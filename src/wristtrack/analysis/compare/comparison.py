@@ -1,10 +1,10 @@
 """``wristtrack compare RUN_DIR REFERENCE``: agreement of a run with a reference system.
 
 The reference (C3D, TRC, Qualisys TSV or a simulated truth.csv) becomes a pose per reference
-frame (:mod:`.reference`); the clocks are aligned coarsely on the speed profiles
-(:mod:`.align`) and then jointly with the rigid registration camera -> lab
-(:mod:`.register`); the agreement is reported as validation studies do
-(:mod:`.stats`). comparison.json keys follow DESIGN.md section 3 (a contract).
+frame (:mod:`.reference`), its markers low-passed first where asked (:mod:`.lowpass`); the
+clocks are aligned coarsely on the speed profiles (:mod:`.align`) and then jointly with the
+rigid registration camera -> lab (:mod:`.register`); the agreement is reported as validation
+studies do (:mod:`.stats`). comparison.json keys follow DESIGN.md section 3 (a contract).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.analysis.compare.align import CoarseAlignment, coarse_offset, speed
+from wristtrack.analysis.compare.lowpass import lowpass_markers
 from wristtrack.analysis.compare.reference import (
     Interpolator,
     ReferencePoses,
@@ -45,13 +46,17 @@ class Comparison:
 
 
 def load_reference(
-    reference: str | Path, markers: str | None, cluster: str | None, layout: np.ndarray | None
+    reference: str | Path, markers: str | None, cluster: str | None, layout: np.ndarray | None,
+    lowpass_hz: float | None = None,
 ) -> ReferencePoses:
-    """The reference as poses: truth.csv as is, a marker file through --markers or --cluster."""
+    """The reference as poses: truth.csv as is, a marker file through --markers or --cluster,
+    its trajectories low-passed at ``lowpass_hz`` first where given (compare/lowpass.py)."""
     path = Path(reference)
     if path.suffix.lower() == ".csv":
         if markers or cluster:
             raise ConfigError("a truth.csv reference takes neither --markers nor --cluster")
+        if lowpass_hz is not None:
+            raise ConfigError("a truth.csv reference is exact: --lowpass is for marker files")
         if not path.is_file():
             raise InputError(f"reference file {path} not found")
         return from_truth(path)
@@ -63,6 +68,8 @@ def load_reference(
             "of the hand) or --markers WRIST=LABEL,... (our markers' labels), not both"
         )
     data = read_markers(path)
+    if lowpass_hz is not None:
+        data = lowpass_markers(data, lowpass_hz)
     if cluster:
         return from_cluster(data, [s.strip() for s in cluster.split(",") if s.strip()])
     if layout is None:
@@ -125,16 +132,19 @@ def compare(
     fit_ratio: bool = True,
     max_lag_s: float | None = None,
     time_offset_s: float | None = None,
+    lowpass_hz: float | None = None,
 ) -> Comparison:
     """Compare a run folder with a reference recording; see the module docstring.
     ``time_offset_s``: the clocks' offset when it is known (systems synchronised by a trigger):
-    no alignment is attempted, which also allows a static trial."""
+    no alignment is attempted, which also allows a static trial. ``lowpass_hz``: the reference's
+    marker trajectories low-passed at this cutoff first, as labs filter them (None: as
+    recorded)."""
     cols, summary = read_run(run_dir)
     side = (summary.get("conventions") or {}).get("side", "right")
     layout = None
     if summary.get("hand_layout"):
         layout = HandLayout.from_dict(summary["hand_layout"], source="summary.json").points
-    ref = load_reference(reference, markers, cluster, layout)
+    ref = load_reference(reference, markers, cluster, layout, lowpass_hz)
     R_ch, t_ch = rows_to_poses(cols)
     t = cols["timestamp"]
     ok = np.isfinite(t_ch).all(axis=1) & np.isfinite(R_ch).all(axis=(1, 2))
@@ -180,7 +190,7 @@ def compare(
         "reference": {
             "path": str(reference), "kind": ref.kind, "rate_hz": ref.rate, "units": ref.units,
             "labels": ref.labels, "frames": len(ref.times), "frames_with_pose":
-            int(ref.valid.sum()), "notes": list(ref.notes),
+            int(ref.valid.sum()), "lowpass_hz": lowpass_hz, "notes": list(ref.notes),
             "rigid_fit_rms_mm": _num(np.nanmedian(ref.fit_rms_mm)) if ref.valid.any() else None,
         },
         "time_offset_s": reg.offset_s,
