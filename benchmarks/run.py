@@ -212,7 +212,7 @@ def _validation(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     from benchmarks.validation import validation_section
 
     section = validation_section(ctx.cache, ctx.quick, f)
-    return f.get("validation_summary", []), section
+    return [f"- {line}" for line in f.get("validation_summary", [])], section
 
 
 def _paper(ctx: Context, f: dict) -> tuple[list[str], list[str]]:

@@ -245,7 +245,7 @@ def _round_trip_summary(calm: list[dict], mode: str, how: str) -> tuple[dict, st
     met = ("failed" not in worst and worst["offset_ms"] <= 2 and worst["rot_deg"] <= 0.1
            and worst["mm"] <= 0.5 and worst["pos_pct"] <= 5 and worst["ori_pct"] <= 5)
     return worst, (
-        f"Round trip on the three calm recorded motions, our six markers in the reference {how} "
+        f"Round trip on the three calm recorded motions, our six markers in the reference, {how} "
         "(targets: offset 2 ms, transform 0.1 deg / 0.5 mm, RMSE within 5 % of `evaluate`): "
         + ("**failed to track**" if "failed" in worst else
            f"worst offset error {worst['offset_ms']:.2f} ms, transform {worst['rot_deg']:.3f} "
@@ -285,7 +285,7 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
                          offset_given=True, folder=BIOBUDDY)]
     worst, summary = _round_trip_summary(calm, "markers", "as recorded")
     worst_lp, summary_lp = _round_trip_summary(
-        calm, "lowpass", f"low-passed at {LOWPASS_HZ:g} Hz (`--lowpass {LOWPASS_HZ:g}`)")
+        calm, "lowpass", f"low-passed at {LOWPASS_HZ:g} Hz by `--lowpass {LOWPASS_HZ:g}`")
     noise_deg = _reference_noise_deg()
     if findings is not None:
         findings["validation"] = worst
