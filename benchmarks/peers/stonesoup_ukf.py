@@ -48,6 +48,7 @@ from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.geometry import so3_exp, so3_log
 from wristtrack.hand import HandLayout
+from wristtrack.tracking.generic_step import expected_markers
 from wristtrack.tracking.initialise import initialise
 from wristtrack.tracking.models import ConstantRateModel, ProcessNoise
 from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
@@ -169,8 +170,9 @@ class StoneSoupTracker:
         blob_of = {id(d): int(i) for d, i in zip(detections, usable, strict=True)}
 
         prediction = self.predictor.predict(self.track[-1], timestamp=when)
-        expected = self._expected(prediction.state_vector, obs)
         x_pred = np.asarray(prediction.state_vector, float)[:, 0]
+        # markers in view at the predicted pose, by the tracker's own rule
+        expected = expected_markers(obs, x_pred, self.camera, self.config.facing_cos)
         y_pred = obs(x_pred[None])[0]
         var = obs.noise_variance(x_pred, y_pred).reshape(obs.n_markers, k)
         labels = np.full(det.count, -1)
@@ -207,16 +209,6 @@ class StoneSoupTracker:
         if n_assoc == 0 and len(self.track) and self.track[-1].timestamp != when:
             self.track.append(GaussianState(prediction.state_vector, prediction.covar, when))
         return self._result(det, status, labels, n_assoc)
-
-    def _expected(self, x: np.ndarray, obs: MarkerObservation) -> np.ndarray:
-        """Markers in view at the predicted pose (the tracker's rule: in front, palm not turned
-        away, centre on the sensor)."""
-        X = np.asarray(x, dtype=float).T
-        pts = obs.marker_points(X)[0]
-        normal = self.R_c0 @ _rotvec_pose(X)[0][0][:, 2]
-        facing = -(pts @ normal) / np.linalg.norm(pts, axis=1)
-        ok = (facing > self.config.facing_cos) & (pts[:, 2] > 0)
-        return ok & self.camera.in_image(self.camera.project(pts))
 
     def _initialise(self, det: Detections, when: datetime) -> FrameResult:
         try:

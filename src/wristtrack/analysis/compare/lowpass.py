@@ -22,6 +22,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from wristtrack.analysis.motion_profiles import true_spans
 from wristtrack.errors import ConfigError
 from wristtrack.io.markers.data import MarkerData
 
@@ -52,7 +53,7 @@ def lowpass_markers(data: MarkerData, cutoff_hz: float) -> MarkerData:
     xyz = data.xyz.copy()
     short = 0
     for k in range(xyz.shape[1]):
-        for start, stop in _stretches(np.isfinite(xyz[:, k]).all(axis=1)):
+        for start, stop in true_spans(np.isfinite(xyz[:, k]).all(axis=1)):
             try:
                 xyz[start:stop, k] = sosfiltfilt(sos, xyz[start:stop, k], axis=0)
             except ValueError:  # shorter than the filter's padding
@@ -63,8 +64,3 @@ def lowpass_markers(data: MarkerData, cutoff_hz: float) -> MarkerData:
         note += f"; {short} gap-free stretch(es) too short to filter kept as recorded"
     return replace(data, xyz=xyz, notes=(*data.notes, note))
 
-
-def _stretches(ok: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of each run of True in ``ok``."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
