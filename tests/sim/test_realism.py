@@ -87,11 +87,100 @@ def test_holes_and_invalid_border_like_the_real_frames(real_depth, structured):
         assert np.all(d[:, -realism.BORDER_RIGHT + 2:] == 0)
         assert np.all(d[:realism.BORDER_TOP - 2] == 0)
         assert np.mean(d[:, :3] == 0) > 0.6 and np.mean(d[:, 40:60] == 0) < 0.4
-    # Holes along the hand's outline: where the depth jumps from hand to table.
-    hand = (plain.depth > 0) & (plain.depth < 720)
-    ring = cv2.dilate(hand.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool) & ~cv2.erode(
-        hand.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    assert np.mean(frame.depth[ring] == 0) > 0.2
+
+
+def _jumps(depth: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
+    """(K, 4) each depth jump of more than 5 % between valid pixels along the rows of
+    ``depth``: the columns of the valid pixel before and after it, whether the nearer surface
+    is on the right (1) or left (0), and the number of holes between the two."""
+    out = []
+    for row in depth[rows].astype(float):
+        idx = np.flatnonzero(row > 0)
+        idx = idx[(idx > 40) & (idx < len(row) - 40)]  # clear of the invalid borders
+        a, b = idx[:-1], idx[1:]
+        jump = np.abs(row[a] - row[b]) > 0.05 * np.minimum(row[a], row[b])
+        out += [(i, j, float(row[j] < row[i]), j - i - 1)
+                for i, j in zip(a[jump], b[jump], strict=True)]
+    return np.array(out, dtype=float).reshape(-1, 4)
+
+
+def _fattening(bgr: np.ndarray, depth: np.ndarray) -> float:
+    """How far (px) the nearer surface's depth reaches past its outline in the colour image:
+    at each straight jump with flat depth on both sides, the strongest grey-level edge within
+    8 px; the mean of the median offsets of the nearer surface's left and right edges (a
+    misregistration moves those two alike and drops out)."""
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(float)
+    offsets: dict[float, list[float]] = {0.0: [], 1.0: []}
+    for y, row in enumerate(depth.astype(float)):
+        for i, _, near_right, gap in _jumps(row[None]):
+            i = int(i)
+            side = row[i - 3:i + 5]
+            if gap or i < 12 or i > len(row) - 12 or np.ptp(side[:4]) > 0.02 * side[0] \
+                    or np.ptp(side[4:]) > 0.02 * side[4]:
+                continue
+            g = np.abs(np.diff(grey[y, i - 7:i + 9]))
+            k = int(np.argmax(g))
+            if g[k] < 12 or not 0 < k < len(g) - 1:
+                continue
+            sub = 0.5 * (g[k - 1] - g[k + 1]) / min(g[k - 1] - 2 * g[k] + g[k + 1], -1e-9)
+            colour_edge = i - 7 + k + 0.5 + sub
+            past = colour_edge - (i + 0.5)  # > 0: depth's edge left of the colour edge
+            offsets[near_right].append(past if near_right else -past)
+    return 0.5 * (float(np.median(offsets[1.0])) + float(np.median(offsets[0.0])))
+
+
+def test_real_depth_edges_jump_straight_and_fatten_the_nearer_surface(real_depth):
+    """The real OpenNI frames: the depth goes straight from one surface to the other (no band
+    of holes at 93-96 % of its jumps) and the nearer surface reaches 1-2 px past its outline in
+    the colour image, the simulator's realism.FATTEN_PX."""
+    files = sorted(REAL_FRAMES.glob("*_rgb.tiff"))
+    for depth, rgb in zip(real_depth, files, strict=True):
+        jumps = _jumps(depth)
+        assert np.mean(jumps[:, 3] == 0) > 0.9
+        assert 0.8 < _fattening(cv2.imread(str(rgb)), depth) < 2.4
+    assert realism.FATTEN_PX == 2  # 1 or 2 px, 1.5 on average
+
+
+def _box_in_front(seed: int, box_z: float = 0.70, wall_z: float = 0.85):
+    """Structured-light depth (m) of a box ``box_z`` away before a wall at ``wall_z``, the box's
+    clean outline (columns 250..390, rows 180..300) and the sensor."""
+    scene = make_scene("deviation", 0, n_frames=2)
+    cam = scene.camera
+    z = np.full((cam.height, cam.width), wall_z)
+    z[180:300, 250:390] = box_z
+    rng = np.random.default_rng(seed)
+    bank = rng.standard_normal((2, cam.height + NOISE_PAD, cam.width + NOISE_PAD),
+                               dtype=np.float32)
+    sensor = DepthSensor(with_effects(scene, ["structured_light"]), z, bank, rng,
+                         np.random.default_rng([seed, 4]))
+    raw = sensor.capture(np.empty((0, 0)), (0, 0, 0, 0)).astype(float) * cam.depth_scale
+    return raw, sensor
+
+
+def test_rendered_depth_edges_fatten_the_nearer_surface_like_the_real_frames():
+    """The box's depth reaches 1-2 px past its outline on both sides, its left edge jumps
+    straight to the wall (its right one has the projector's shadow), and the wall keeps its
+    depth away from the edge."""
+    reach = {"left": [], "right": []}
+    for seed in range(3):
+        raw, sensor = _box_in_front(seed)
+        dx, dy = sensor.sl_shift
+        rows = slice(200 + dy, 280 + dy)  # clear of the box's top and bottom
+        box = (raw[rows] > 0) & (raw[rows] < 0.76)
+        cols = np.arange(raw.shape[1])
+        first = np.array([cols[b].min() for b in box])
+        last = np.array([cols[b].max() for b in box])
+        reach["left"] += list(250 + dx - first)
+        reach["right"] += list(last - (389 + dx))
+        left = _jumps(raw, rows)
+        left = left[(left[:, 2] == 1) & (np.abs(left[:, 1] - 250 - dx) < 6)]
+        assert len(left) >= 75 and np.mean(left[:, 3] == 0) > 0.9
+        assert np.all(np.abs(raw[rows, 200:235][raw[rows, 200:235] > 0] - 0.85) < 0.02)
+    for side in ("left", "right"):
+        r = np.array(reach[side])
+        # 1 or 2 px, and the lateral jitter of depth edges (0.8 px) on top
+        assert 1.0 <= np.median(r) <= 2.0, (side, np.median(r))
+        assert np.mean((r >= 0) & (r <= 4)) > 0.9, side
 
 
 def test_axial_noise_is_nguyens_and_spatially_correlated(structured):
