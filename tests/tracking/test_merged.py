@@ -161,7 +161,8 @@ def test_a_left_hand_whose_knuckle_markers_line_up_is_tracked_through_it(tmp_pat
     strength), seed 8, 1.7 s around its hardest pose (t = 4.7 s: 45 deg extension, 30 deg
     supination, 20 deg ulnar deviation), where MCP3-MCP5 line up and show as one or two blobs:
     taken as one marker each, the worst of frames 141-147 was 3 deg off; as the mean of theirs,
-    1.2."""
+    1.2. Since the simulated depth fattens the front knuckle over the ones behind it (as real
+    structured-light depth does), 4.3 and 1.5 deg."""
     scene = make_scene(BASE_SCENARIO, 8, effects=list(PRESET_REAL), hand_side="left")
     scene = replace(scene, times=scene.times[110:160])
     camera, hand, detections, truth = recorded_detections(
@@ -184,7 +185,7 @@ def test_a_left_hand_whose_knuckle_markers_line_up_is_tracked_through_it(tmp_pat
             assert any(r.n_visible > (r.labels >= 0).sum() for r in results[lined_up])
         worst[on] = max(np.degrees(rotation_angle(r.R_ch @ t.T))
                         for r, t in zip(results[lined_up], truth.R_ch[lined_up], strict=True))
-    assert worst[True] < 1.4 and worst[True] < 0.5 * worst[False], worst
+    assert worst[True] < 1.7 and worst[True] < 0.5 * worst[False], worst
 
 
 def test_a_knuckle_missed_beside_its_neighbour_is_not_taken_as_merged(tmp_path, monkeypatch):
