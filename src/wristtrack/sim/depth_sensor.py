@@ -83,10 +83,11 @@ class DepthSensor:
             zc = np.where(np.isfinite(z), z, 1e3).astype(np.float32)
             h, w = z.shape
             holes = np.zeros((h, w), bool)
+            # drawn either way: the recording's other noise stays as it was
+            oy, ox = (int(v) for v in self.rng.integers(NOISE_PAD, size=2))
             if edge_holes:
                 edge = _depth_edges(zc)
                 ragged = cv2.dilate(edge.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-                oy, ox = (int(v) for v in self.rng.integers(NOISE_PAD, size=2))
                 coin = self.bank[1, y0 + oy:y0 + oy + h, x0 + ox:x0 + ox + w] > 0.25
                 holes = edge | (ragged & coin)
             cols = np.arange(x0, x0 + w, dtype=np.float32)
@@ -136,6 +137,7 @@ class DepthSensor:
 
     def _prepare_structured(self, H: int, W: int) -> None:
         r = self.fx_rng
+        self.fatten_rng = np.random.default_rng(r.bit_generator.seed_seq.spawn(1)[0])
         pad = (H + NOISE_PAD, W + NOISE_PAD)
         win = realism.MATCH_WINDOW_PX
         # Correlated over the matching window: white noise averaged over 9x9, unit variance.
@@ -172,7 +174,9 @@ class DepthSensor:
             oy, ox = (int(v) for v in r.integers(NOISE_PAD, size=2))
             return self.sl_bank[i, oy:oy + H, ox:ox + W]
 
-        z = _fatten(z, bank(0) > 0.0)
+        # its own generator, so the depth noise drawn after it stays as it was
+        oy, ox = (int(v) for v in self.fatten_rng.integers(NOISE_PAD, size=2))
+        z = _fatten(z, self.sl_bank[0, oy:oy + H, ox:ox + W] > 0.0)
 
         # The angle each pixel's surface is seen at (the clean depth's), in the re-rendered
         # region and a pixel around it; the static background's is computed once.
