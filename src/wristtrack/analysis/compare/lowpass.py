@@ -4,12 +4,9 @@ An optoelectronic system's marker noise (0.05-0.1 mm per coordinate) is small fo
 but not for the orientation of markers a few centimetres apart: on our six markers, 0.05 mm
 is 0.07 deg of orientation per frame (their rigid fit), a third of what the tracker's error
 is, and it adds to every orientation RMSE ``compare`` reports. Labs remove it before anything
-is computed from the markers with a fourth-order zero-lag Butterworth low-pass (Winter,
-Biomechanics and Motor Control of Human Movement, 2009, ch. 3): a second-order filter run
-forward and backward (``scipy.signal.sosfiltfilt``), its design cutoff raised by Winter's
-correction so that the two passes together are 3 dB down at the cutoff asked for: a pass's gain
-squared is 1 / (1 + (w / w_d)^4) with w = tan(pi f / rate) (the digital filter's warped
-frequency), so w_d = w_c / 0.802, 0.802 = (sqrt(2) - 1)^(1/4).
+is computed from the markers with a fourth-order zero-lag Butterworth low-pass, 3 dB down at
+the cutoff asked for (Winter, Biomechanics and Motor Control of Human Movement, 2009, ch. 3;
+``motion_profiles.dual_pass_butterworth``, the kinematics' low-pass too).
 
 Gaps (NaN) are not bridged: each marker's gap-free stretches are filtered on their own, and a
 stretch too short for the filter's edge padding is kept as recorded.
@@ -20,16 +17,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
+from scipy.signal import sosfiltfilt
 
-from wristtrack.analysis.motion_profiles import true_spans
+from wristtrack.analysis.motion_profiles import dual_pass_butterworth, true_spans
 from wristtrack.errors import ConfigError
 from wristtrack.io.markers.data import MarkerData
-
-ORDER = 2  # per pass: forward and backward make the fourth-order zero-lag filter
-# The two passes square the filter's gain, so its -3 dB point falls below the design cutoff by
-# (sqrt(2) - 1) ** (1 / (2 ORDER)) = 0.802 in warped frequency (Winter's correction).
-DUAL_PASS = (np.sqrt(2.0) - 1.0) ** (1.0 / (2 * ORDER))
 
 
 def butterworth(cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -42,8 +34,7 @@ def butterworth(cutoff_hz: float, rate_hz: float) -> np.ndarray:
             f"a {cutoff_hz:g} Hz low-pass cutoff is at or above the reference's Nyquist "
             f"frequency ({0.5 * rate_hz:g} Hz at {rate_hz:g} Hz): give a lower cutoff"
         )
-    warped = np.tan(np.pi * cutoff_hz / rate_hz) / DUAL_PASS
-    return butter(ORDER, rate_hz / np.pi * np.arctan(warped), fs=rate_hz, output="sos")
+    return dual_pass_butterworth(cutoff_hz, rate_hz)
 
 
 def lowpass_markers(data: MarkerData, cutoff_hz: float) -> MarkerData:
