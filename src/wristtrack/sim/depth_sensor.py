@@ -219,7 +219,8 @@ def _fatten(z: np.ndarray, wide: np.ndarray) -> np.ndarray:
     On the real OpenNI frames the depth jumps straight from one surface to the other at
     93-96 % of the edges, and the nearer surface reaches 1.0-2.1 px (mean 1.6) past its
     outline in the colour image (realism.FATTEN_PX)."""
-    far = np.where(z > 0, z, np.inf).astype(np.float32)
+    none = np.float32(1e4)  # no surface: farther than any (OpenCV's erosion saturates inf)
+    far = np.where(z > 0, z, none).astype(np.float32)
     narrow_k = np.ones((2 * realism.FATTEN_PX - 1,) * 2, np.uint8)
     wide_k = np.ones((2 * realism.FATTEN_PX + 1,) * 2, np.uint8)
     nearest = np.where(wide, cv2.erode(far, wide_k), cv2.erode(far, narrow_k))

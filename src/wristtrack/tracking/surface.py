@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
+import cv2
 import numpy as np
 from scipy.spatial import Delaunay
 
@@ -60,6 +61,8 @@ class SurfaceSettings:
     gate: float = 0.008  # m: a pixel further off the patch's plane is something else
     min_valid: float = 0.5  # fraction of a patch's pixels that must read and pass the gate
     min_points: int = 12  # pixels (averaged over the still start) to learn a patch's plane
+    edge_jump: float = 0.012  # m between neighbouring pixels: a depth edge
+    edge_clearance: int = 3  # px kept clear of a depth edge (0: none)
     grazing_cos: float = 0.3  # a patch seen more obliquely than this is not read
     nis_quantile: float = 0.999  # an update beyond this chi-square quantile is not applied
 
@@ -214,6 +217,8 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     with np.errstate(divide="ignore", invalid="ignore"):
         e = z - plane_depths(P[:, None], N[:, None], rays)
     good = inside & (z > 0) & (np.abs(e) < settings.gate)
+    if settings.edge_clearance > 0:
+        good &= ~near_depth_edges(depth, camera.depth_scale, iv, iu, settings)
     n = good.sum(axis=1)
     read = (n >= settings.min_valid * inside.sum(axis=1)) & (n > 0)
     if not read.any():
@@ -230,6 +235,39 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
     measured = plane_depths(P[read], N[read], centre) + mean
     return PatchReading(index[read], centre, measured, P[read], N[read])
+
+
+def near_depth_edges(depth: np.ndarray, depth_scale: float, iv: np.ndarray, iu: np.ndarray,
+                     settings: SurfaceSettings) -> np.ndarray:
+    """Whether each pixel (rows ``iv``, columns ``iu``, any shape, inside the frame) of the raw
+    depth frame ``depth`` is on the near side of a depth edge: within
+    ``settings.edge_clearance`` px of two neighbouring readings more than ``settings.edge_jump``
+    apart, and nearer than the farthest reading there by as much.
+
+    A structured-light camera gives the nearer surface's depth to pixels of the farther one
+    beside an edge (its matching window straddles the edge: 1-2 px on the real OpenNI frames),
+    and the colour-depth misregistration (1-2 px) moves the edge further. A patch on the back
+    of a hand turned edge-on that reaches past the hand's outline read the hand's edge there as
+    skin, off by the slope times the displacement but within the gate. The farther surface's
+    own pixels (skin beside a finger held over it) are kept."""
+    c = settings.edge_clearance
+    H, W = depth.shape
+    v0, v1 = max(int(iv.min()) - c - 1, 0), min(int(iv.max()) + c + 2, H)
+    u0, u1 = max(int(iu.min()) - c - 1, 0), min(int(iu.max()) + c + 2, W)
+    z = depth[v0:v1, u0:u1].astype(np.float32) * np.float32(depth_scale)
+    # an edge: neighbouring readings more than edge_jump apart (a slope needs 84 deg at arm's
+    # length for that; within a 3x3 neighbourhood, two pixels apart, a turned hand's skin did)
+    valid = z > 0
+    edge = np.zeros(z.shape, np.uint8)
+    across = (np.abs(z[:, 1:] - z[:, :-1]) > settings.edge_jump) & valid[:, 1:] & valid[:, :-1]
+    edge[:, 1:] |= across
+    edge[:, :-1] |= across
+    down = (np.abs(z[1:] - z[:-1]) > settings.edge_jump) & valid[1:] & valid[:-1]
+    edge[1:] |= down
+    edge[:-1] |= down
+    window = np.ones((2 * c + 1, 2 * c + 1), np.uint8)
+    near_side = (cv2.dilate(z, window) - z > settings.edge_jump) & (cv2.dilate(edge, window) > 0)
+    return near_side[iv - v0, iu - u0]
 
 
 def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
