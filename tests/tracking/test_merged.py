@@ -194,7 +194,8 @@ def test_a_knuckle_missed_beside_its_neighbour_is_not_taken_as_merged(tmp_path, 
     deviation and pronation MCP2 turns edge-on beside MCP3 and goes unseen while MCP3's blob
     sits on MCP3's centre. Taken as the mean of both, that blob put the hand 5 deg off at frame
     140 and lost the track for 3 frames; taken as MCP3's, every frame has an estimate and the
-    worst of frames 130-149 is 1.4 deg off."""
+    worst of frames 130-149 is 1.4 deg off (2.0 since the simulated depth spreads the nearer
+    surface over the farther one at edges, as real structured-light depth does)."""
     from benchmarks.robustness import render_condition
 
     rec = render_condition(tmp_path / "rec", "all, left hand, mirrored movement", 3, 160)
@@ -210,4 +211,4 @@ def test_a_knuckle_missed_beside_its_neighbour_is_not_taken_as_merged(tmp_path, 
                   if r.has_estimate]
         worst[decidable] = max(np.degrees(rotation_angle(r.R_ch @ t.T)) for r, t in turned)
     assert lost[default] == 0, lost
-    assert worst[default] < 2.0 < 3.5 < worst[np.inf], worst
+    assert worst[default] < 2.5 < 3.5 < worst[np.inf], worst
