@@ -217,8 +217,8 @@ def _fatten(z: np.ndarray, wide: np.ndarray) -> np.ndarray:
     A structured-light camera matches a window of the projected pattern: where the window
     straddles an edge, the nearer surface's pattern wins and the whole window takes its depth.
     On the real OpenNI frames the depth jumps straight from one surface to the other at
-    93-96 % of the edges, and the nearer surface reaches 1.0-2.1 px (mean 1.6) past its
-    outline in the colour image (realism.FATTEN_PX)."""
+    90-95 % of the edges, and the nearer surface reaches 1.0-1.9 px (mean 1.5) past its
+    outline in the colour image (realism.FATTEN_PX; tests/sim/test_realism.py measures both)."""
     none = np.float32(1e4)  # no surface: farther than any (OpenCV's erosion saturates inf)
     far = np.where(z > 0, z, none).astype(np.float32)
     narrow_k = np.ones((2 * realism.FATTEN_PX - 1,) * 2, np.uint8)

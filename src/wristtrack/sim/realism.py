@@ -33,7 +33,7 @@ devices and the literature (``../shared/realdata/README.md``), not tuned to the 
   is seen more than 60 deg from its normal (+1.5 mm at 70 deg at arm's length: a hand turned
   edge-on), disparity quantised to 1/8 px (depth steps 2.85e-3 z^2 m), the nearer surface's
   depth spread 1-2 px over the farther one at depth edges (foreground fattening, no holes
-  there: 93-96 % of the real frames' depth jumps have none), holes in the projector's
+  there: 90-95 % of the real frames' depth jumps have none), holes in the projector's
   shadow, the registered depth map's invalid border as measured on real
   OpenNI frames (top 15, bottom 5, right 31 rows/columns, a ragged left band ~15 px), and
   colour-depth misregistration of 1-2 px.
@@ -100,9 +100,9 @@ BORDER_TOP, BORDER_BOTTOM, BORDER_RIGHT, BORDER_LEFT_RAMP = 15, 5, 31, 15
 EDGE_JUMP_M = 0.012
 # Foreground fattening: the nearer surface's depth reaches 1-2 px past a depth edge (this many at
 # most). Measured on the three real OpenNI frames (pcl_openni_frames): each row's depth jumps
-# (> 5 %) against the strongest colour edge within 8 px, left and right edges of the nearer
-# surface apart (their mean is the fattening, their half difference the misregistration):
-# 2.1, 1.5 and 1.0 px.
+# (> 5 %) against the strongest grey-level edge within 8 px, left and right edges of the nearer
+# surface apart (their mean is the fattening; a misregistration moves both alike): 1.9, 1.5 and
+# 1.0 px (tests/sim/test_realism.py).
 FATTEN_PX = 2
 
 
