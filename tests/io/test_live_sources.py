@@ -409,8 +409,11 @@ def test_openni_dummy_driver_streams_registered_depth_and_colour(tmp_path):
     assert live["ended_by"] == "time limit" and live["frames"]["total"] >= 10
     frames = list(FolderRecording(tmp_path / "rec").frames())
     assert len(frames) >= live["frames"]["total"]
-    # each colour frame paired with its depth (the very first may precede the depth stream)
-    assert all(f.depth is not None and f.depth.dtype == np.uint16 for f in frames[1:])
+    # colour frames paired with their depth: the very first may precede the depth stream, and
+    # on a loaded machine a colour frame whose depth lags too long goes without (openni._pair)
+    paired = [f.depth is not None for f in frames[1:]]
+    assert np.mean(paired) >= 0.8, paired
+    assert all(f.depth.dtype == np.uint16 for f in frames if f.depth is not None)
     assert frames[0].bgr.shape == (240, 320, 3)
     dt = np.diff([f.timestamp for f in frames])
     np.testing.assert_allclose(dt, 0.033, atol=1e-9)  # the driver's 33 ms frame clock
