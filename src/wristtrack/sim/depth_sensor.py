@@ -21,6 +21,7 @@ from wristtrack.depth_noise import (
     depth_sigma,
     depth_sigma_nguyen,
     lateral_sigma_nguyen,
+    neighbour_jumps,
     oblique_sigma,
 )
 from wristtrack.sim import realism
@@ -227,15 +228,16 @@ def _fatten(z: np.ndarray, wide: np.ndarray) -> np.ndarray:
     # Only beside a jump between neighbouring pixels: a steep but continuous surface (a plane
     # turned 78 deg drops 12 mm over two pixels at 0.7 m, 6 mm from one to the next) keeps its
     # depth.
-    beside = cv2.dilate(_neighbour_jumps(z).astype(np.uint8), wide_k) > 0
+    jumps = neighbour_jumps(z, realism.EDGE_JUMP_M, jump_to_zero=True)
+    beside = cv2.dilate(jumps.astype(np.uint8), wide_k) > 0
     spread = beside & (nearest < far - realism.EDGE_JUMP_M)
     return np.where(spread, nearest, z).astype(np.float32)
 
 
 def _near_edges(z: np.ndarray, reach_px: int = 3) -> np.ndarray:
-    """(H, W) bool: within ``reach_px`` of a depth edge (``_neighbour_jumps``) of the clean
-    depth ``z`` (0: no surface)."""
-    edge = _neighbour_jumps(z)
+    """(H, W) bool: within ``reach_px`` of a depth edge (``depth_noise.neighbour_jumps``) of
+    the clean depth ``z`` (0: no surface)."""
+    edge = neighbour_jumps(z, realism.EDGE_JUMP_M, jump_to_zero=True)
     return cv2.dilate(edge.astype(np.uint8), np.ones((2 * reach_px + 1,) * 2, np.uint8)) > 0
 
 
@@ -244,22 +246,6 @@ def _depth_edges(z: np.ndarray) -> np.ndarray:
     pixel's 3x3 neighbourhood."""
     kernel = np.ones((3, 3), np.uint8)
     return (cv2.dilate(z, kernel) - cv2.erode(z, kernel)) > realism.EDGE_JUMP_M
-
-
-def _neighbour_jumps(z: np.ndarray) -> np.ndarray:
-    """(H, W) bool: both pixels of each pair of neighbours (along a row or a column) whose depth
-    ``z`` (m, float32, 0: no surface) differs by more than EDGE_JUMP_M. Unlike
-    ``_depth_edges`` (over 3x3, two pixels apart) it leaves a plane turned up to 84 deg at
-    0.7 m alone."""
-    jump = np.zeros(z.shape, bool)
-    for axis in (0, 1):
-        step = np.abs(np.diff(z, axis=axis)) > realism.EDGE_JUMP_M
-        pad = [(0, 0), (0, 0)]
-        pad[axis] = (0, 1)
-        jump |= np.pad(step, pad)
-        pad[axis] = (1, 0)
-        jump |= np.pad(step, pad)
-    return jump
 
 
 def _incidence_cos(z: np.ndarray, rays: np.ndarray) -> np.ndarray:

@@ -39,6 +39,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from wristtrack.camera import Camera
+from wristtrack.depth_noise import neighbour_jumps
 from wristtrack.filter import ukf
 from wristtrack.hand import HandLayout
 from wristtrack.tracking.observation import (
@@ -255,16 +256,9 @@ def near_depth_edges(depth: np.ndarray, depth_scale: float, iv: np.ndarray, iu: 
     v0, v1 = max(int(iv.min()) - c - 1, 0), min(int(iv.max()) + c + 2, H)
     u0, u1 = max(int(iu.min()) - c - 1, 0), min(int(iu.max()) + c + 2, W)
     z = depth[v0:v1, u0:u1].astype(np.float32) * np.float32(depth_scale)
-    # an edge: neighbouring readings more than edge_jump apart (a slope needs 84 deg at arm's
-    # length for that; within a 3x3 neighbourhood, two pixels apart, a turned hand's skin did)
-    valid = z > 0
-    edge = np.zeros(z.shape, np.uint8)
-    across = (np.abs(z[:, 1:] - z[:, :-1]) > settings.edge_jump) & valid[:, 1:] & valid[:, :-1]
-    edge[:, 1:] |= across
-    edge[:, :-1] |= across
-    down = (np.abs(z[1:] - z[:-1]) > settings.edge_jump) & valid[1:] & valid[:-1]
-    edge[1:] |= down
-    edge[:-1] |= down
+    # between neighbours: within a 3x3 neighbourhood, two pixels apart, a turned hand's skin
+    # counted as edges
+    edge = neighbour_jumps(z, settings.edge_jump, jump_to_zero=False).astype(np.uint8)
     window = np.ones((2 * c + 1, 2 * c + 1), np.uint8)
     near_side = (cv2.dilate(z, window) - z > settings.edge_jump) & (cv2.dilate(edge, window) > 0)
     return near_side[iv - v0, iu - u0]
