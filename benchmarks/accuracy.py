@@ -44,13 +44,15 @@ def online(factory: Callable[[Camera, HandLayout], object]) -> Runner:
     return run
 
 
-def _default_tracker(camera: Camera, layout: HandLayout | None,
-                     detections: list[Detections]) -> tuple[Tracker, list[FrameResult]]:
-    """The default tracker stepped through ``detections`` as ``wristtrack track`` runs it:
-    without a layout, a first pass surveys it over the recording and a second tracks with it
-    (pipeline/track.py; here on the same detections). The last pass's tracker and results."""
+def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list[Detections],
+                     config: TrackerConfig | None = None) -> tuple[Tracker, list[FrameResult]]:
+    """The default tracker (or one of ``config``) stepped through ``detections`` as
+    ``wristtrack track`` runs it: without a layout, a first pass surveys it over the recording
+    and a second tracks with it (pipeline/track.py; here on the same detections). The last
+    pass's tracker and results."""
+    config = TrackerConfig() if config is None else config
     survey = RunSurvey() if layout is None else None
-    tracker = Tracker(camera, layout, TrackerConfig())
+    tracker = Tracker(camera, layout, config)
     results = []
     for d in detections:
         results.append(tracker.step(d))
@@ -58,7 +60,7 @@ def _default_tracker(camera: Camera, layout: HandLayout | None,
             survey.add(tracker, d, results[-1])
     surveyed = survey.surveyed_layout() if survey is not None else None
     if surveyed is not None:
-        tracker = Tracker(camera, surveyed, TrackerConfig())
+        tracker = Tracker(camera, surveyed, config)
         results = [tracker.step(d) for d in detections]
     return tracker, results
 
@@ -67,12 +69,23 @@ def _default(camera: Camera, layout: HandLayout | None, detections: list[Detecti
     return _default_tracker(camera, layout, detections)[1]
 
 
-def _smoothed(camera: Camera, layout: HandLayout | None, detections: list[Detections]):
-    """The default tracker, then the offline unscented RTS smoother over its results."""
+def _smoothed(camera: Camera, layout: HandLayout | None, detections: list[Detections],
+              config: TrackerConfig | None = None):
+    """The default tracker (or one of ``config``), then the offline unscented RTS smoother over
+    its results."""
     from wristtrack.tracking.smoothed_results import smooth_results
 
-    tracker, results = _default_tracker(camera, layout, detections)
+    tracker, results = _default_tracker(camera, layout, detections, config)
     return smooth_results(tracker.model, results, tracker.config.ukf)
+
+
+def _following(camera: Camera, layout: HandLayout | None, detections: list[Detections]):
+    return _default_tracker(camera, layout, detections, TrackerConfig(follow_slide=True))[1]
+
+
+def _following_smoothed(camera: Camera, layout: HandLayout | None,
+                        detections: list[Detections]):
+    return _smoothed(camera, layout, detections, TrackerConfig(follow_slide=True))
 
 
 def _opencv(camera: Camera, layout: HandLayout):
@@ -99,10 +112,14 @@ class Row:
 
 
 DEFAULT = "default"
+FOLLOW = "default, skin slide in the state"  # wristtrack track --follow-slide
+FOLLOW_SMOOTHED = "default, skin slide in the state, + smoother (offline)"
 TIE = 0.01  # relative difference below which the summary calls two errors a tie
 ACCURACY_ROWS: dict[str, Row] = {
     DEFAULT: Row(_default, ours=True),
     "default + smoother (offline)": Row(_smoothed, ours=True),
+    FOLLOW: Row(_following, ours=True),
+    FOLLOW_SMOOTHED: Row(_following_smoothed, ours=True),
     "paper model, paper's rule": Row(online(lambda c, lay: Tracker(c, lay, TrackerConfig.paper()))),
     "OpenCV per-frame (IPPE PnP)": Row(online(_opencv)),
     "Stone Soup UKF + PDA": Row(online(_stonesoup)),

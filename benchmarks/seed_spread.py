@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from benchmarks.accuracy import DEFAULT
+from benchmarks.accuracy import DEFAULT, FOLLOW, FOLLOW_SMOOTHED
 from benchmarks.robustness import CONDITIONS, SMOOTHED, per_seed
 
 SPREAD_SEEDS = 10
@@ -33,17 +33,26 @@ FIGURES: tuple[tuple[str, str, str, float, bool], ...] = (
     ("default", "recall", "recall", 0.98, False),
     ("default", "cover", "coverage", 0.99, False),
 )
+# The same recordings tracked with the skin slide in the state (``track --follow-slide``,
+# tracking/slide_model.py), beside the default: (tracker row, metric, label).
+FOLLOWING: tuple[tuple[str, str, str], ...] = (
+    (FOLLOW, "rot", "orientation RMSE (deg), slide in the state"),
+    (FOLLOW, "rom", "worst RoM error (deg), slide in the state"),
+    (FOLLOW_SMOOTHED, "rom", "worst RoM error, smoothed (deg), slide in the state"),
+)
 
 
 def seed_spread(cache: Path, seeds: tuple[int, ...], n_frames: int | None = None,
                 conditions: tuple[str, ...] = COMBINED) -> dict[str, dict[str, np.ndarray]]:
-    """condition -> '<tracker row>/<metric>' -> each seed's figure (len(seeds),)."""
+    """condition -> '<tracker row>/<metric>' -> each seed's figure (len(seeds),): FIGURES'
+    and FOLLOWING's."""
     out: dict[str, dict[str, np.ndarray]] = {}
+    trackers = {"default": DEFAULT, FOLLOW: FOLLOW, FOLLOW_SMOOTHED: FOLLOW_SMOOTHED}
     for condition in conditions:
-        per = per_seed(cache, condition, seeds, n_frames, {"default": DEFAULT})
+        per = per_seed(cache, condition, seeds, n_frames, trackers)
         out[condition] = {
             f"{row}/{metric}": np.array([m[metric] for m in per[row]], dtype=float)
-            for row, metric, *_ in FIGURES if row in per
+            for row, metric, *_ in (*FIGURES, *FOLLOWING) if row in per
         }
     return out
 
@@ -113,5 +122,42 @@ def spread_section(spread: dict[str, dict[str, np.ndarray]], seeds: tuple[int, .
         summary.append(
             f"- {condition}, over {len(seeds)} seeds: "
             + ("meets every target." if not missed else "misses " + ", ".join(missed) + ".")
+            + _following_line(figures)
         )
-    return summary, [*lines, ""]
+    return summary, [*lines, "", *_following_table(spread, len(seeds))]
+
+
+def _following_line(figures: dict[str, np.ndarray]) -> str:
+    """' With the skin slide in the state: ...' for a summary line (empty without the rows)."""
+    pairs = [("worst RoM", "default/rom", f"{FOLLOW}/rom"),
+             ("smoothed", f"{SMOOTHED}/rom", f"{FOLLOW_SMOOTHED}/rom")]
+    parts = [f"{name} {np.nanmean(figures[a]):.2f} -> {np.nanmean(figures[b]):.2f}"
+             for name, a, b in pairs if a in figures and b in figures]
+    return f" With the skin slide in the state: {', '.join(parts)}." if parts else ""
+
+
+def _following_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[str]:
+    """The default's figures beside those with the skin slide in the state (means over the
+    seeds); nothing where the rows were not run."""
+    rows = []
+    for condition, figures in spread.items():
+        for row, metric, label in FOLLOWING:
+            base = "default" if row == FOLLOW else SMOOTHED
+            a, b = figures.get(f"{base}/{metric}"), figures.get(f"{row}/{metric}")
+            if a is None or b is None:
+                continue
+            rows.append(f"| {condition} | {label} | {_fmt(float(np.nanmean(a)), False)} | "
+                        f"{_fmt(float(np.nanmean(b)), False)} | "
+                        f"{int(np.sum(b < a))} of {n} |")
+    if not rows:
+        return []
+    return [
+        "The same recordings with the MCP markers' skin slide carried in the filter state "
+        "(`wristtrack track --follow-slide`, tracking/slide_model.py) rather than taken as "
+        "noise the markers share afresh each frame; means over the seeds:",
+        "",
+        "| condition | figure | default | slide in the state | seeds where it is lower |",
+        "|---|---|---|---|---|",
+        *rows,
+        "",
+    ]

@@ -16,8 +16,8 @@ def positive_int(text: str) -> int:
 
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
-    """--model, --association, --no-depth, --no-skin-depth and --fixed-noise, read back by
-    :func:`tracker_config`."""
+    """--model, --association, --no-depth, --no-skin-depth, --follow-slide and --fixed-noise,
+    read back by :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
@@ -25,6 +25,11 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
         "--no-skin-depth", action="store_true",
         help="use the markers' depth only, not the skin between them (e.g. a gloved or bandaged "
              "hand whose surface moves against the markers)")
+    parser.add_argument(
+        "--follow-slide", action="store_true",
+        help="carry the skin's slide over the knuckles in the filter state (hands whose fingers "
+             "move: more accurate at the extremes of turned hands; slower on cameras without "
+             "lens distortion)")
     parser.add_argument(
         "--fixed-noise", action="store_true",
         help="take the blobs' pixel noise and the skin slide as the model gives them instead of "
@@ -41,6 +46,7 @@ def tracker_config(args: argparse.Namespace):
         return TrackerConfig.paper(model=args.model)
     return TrackerConfig(association=args.association, use_depth=not args.no_depth,
                          surface=None if args.no_skin_depth else SurfaceSettings(),
-                         adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise)
+                         adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise,
+                         follow_slide=args.follow_slide)
 
 

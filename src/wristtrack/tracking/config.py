@@ -8,6 +8,7 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.tracking.models import MODELS, ProcessNoise
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.slide_model import SlidingSkinModel
 from wristtrack.tracking.surface import SurfaceSettings
 
 
@@ -24,6 +25,12 @@ class TrackerConfig:
     # noise from it (tracking/noise_scale.py, pixel_noise.py); False: the model's throughout.
     adapt_slide: bool = True
     adapt_pixel: bool = True
+    # The default model with the MCP markers' skin slide in its state (tracking/slide_model.py)
+    # rather than as noise the markers share afresh each frame: more accurate on hands whose
+    # fingers move (docs/BENCHMARKS.md, spread), a little less on rigid ones, and on the generic
+    # path only (the compiled step has the 12-D state): 2.6x the time per frame on a camera
+    # without lens distortion (with distortion the generic path runs either way).
+    follow_slide: bool = False
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
@@ -73,6 +80,13 @@ class TrackerConfig:
         whose update the estimate reads (JPDA's mixes blobs; on the measurement-level `mix`
         recordings learning with it cost 0.95 -> 2.76 deg)."""
         return self.adapt_pixel and self.association == "gnn"
+
+    def make_model(self):
+        """The state model these settings name: the default model with the skin slide in its
+        state where ``follow_slide`` (and a slide is modelled), else MODELS[model]."""
+        if self.model == "default" and self.follow_slide and any(self.measurement.skin_slide):
+            return SlidingSkinModel(self.process, self.measurement.skin_slide)
+        return MODELS[self.model](self.process)
 
     @property
     def skin_depth(self) -> bool:

@@ -213,7 +213,8 @@ def reanchor(
     new: HandLayout,
     w0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The default model's state (x (18,), P (12,12)) and W0 re-expressed for layout ``new``.
+    """The default model's state (x (18,), P (12,12); or with the skin slide, (21,), (15,15))
+    and W0 re-expressed for layout ``new``.
 
     The new hand frame is the old one moved by T (the rigid fit of ``new`` onto ``old``:
     p_old = T_R p_new + T_t). W0 moves with it, or becomes ``w0`` = (R_ch, t_ch, cov): a pose
@@ -232,8 +233,9 @@ def reanchor(
     pn = T_R.T @ (p + arm - T_t)
     vn = T_R.T @ (v + np.cross(w, arm))
     wn = T_R.T @ w
-    J = np.zeros((12, 12))
-    for k in range(4):
+    n = P.shape[0]  # 15 with the skin slide: a hand-frame vector, which W0 does not turn
+    J = np.zeros((n, n))
+    for k in range(n // 3):
         J[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = T_R.T
     J[3:6, 0:3] = -T_R.T @ skew(arm)  # a turn of the hand moves the new origin
     Pn = J @ P @ J.T
@@ -246,10 +248,12 @@ def reanchor(
         Q = R_w.T @ R_c0n
         Rn, pn = R_w.T @ R_ch, R_w.T @ (t_ch - t_w)
         vn, wn = Q @ vn, Q @ wn
-        M = np.kron(np.eye(4), Q)
+        M = np.eye(n)
+        M[:12, :12] = np.kron(np.eye(4), Q)
         Pn = M @ Pn @ M.T
         rot = np.kron(np.eye(2), R_w.T)  # camera-frame perturbations into W0 axes
         w0_cov = rot @ cov_w @ rot.T
         R_c0n, t_c0n = R_w, t_w
-    xn = np.concatenate((Rn.reshape(9), pn, vn, wn))
+    slide = [T_R.T @ x[18:21]] if x.size > 18 else []
+    xn = np.concatenate((Rn.reshape(9), pn, vn, wn, *slide))
     return xn, 0.5 * (Pn + Pn.T), R_c0n, t_c0n, w0_cov

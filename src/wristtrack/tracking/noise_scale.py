@@ -54,6 +54,11 @@ PRIOR_WEIGHT = 3.0
 # Guard rails on the slide's sigma, as a factor on the model's: a tenth (no slide is ever
 # ruled out) to twice it.
 SD_FACTOR_RANGE = (0.1, 2.0)
+# A slide the state carries (tracking/slide_model.py) is measured as if it were not (its
+# spread against the layout, ``MarkerObservation.as_rigid``), where the prior follows part of
+# it: the factor comes out at 0.55-0.8 of a slide's own sigma (this module's doc). The state's
+# stationary variance is the factor over this share squared, at most the model's.
+WHITE_SHARE = 0.7
 MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide from the pose
 # Frames scored: at most one per this interval. Scoring costs about ten compiled tracker steps
 # (an unscented transform and the noise model in NumPy), and the noise changes over seconds
@@ -84,6 +89,13 @@ def slide_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
     are left out (:func:`undoubted`)."""
     labels = undoubted(labels, det)
     taken = labels[labels >= 0]
+    if hasattr(model, "slide_scale"):
+        # The state carries the slide (tracking/slide_model.py): its spread is measured as
+        # without it, against the layout, where the slide the state followed is in the
+        # residuals. (Against the markers moved by it, the residuals hardly show whether the
+        # state's slide moves too much or too little, and the factor stayed at 1 on rigid
+        # hands.)
+        obs = obs.as_rigid(model.slide_sigma * math.sqrt(slide_factor))
     if not obs.slide.any() or np.unique(taken).size != taken.size or taken.size < MIN_MARKERS:
         return None
     z = det.uv if obs.k == 2 else np.column_stack((det.uv, det.depth))
@@ -183,7 +195,10 @@ class LearnedNoise:
         if scores is None:
             return changed  # the frame stays due
         elapsed, self._since = self._since, 0.0
-        return self.slide.update(scores, elapsed) or changed
+        taken = self.slide.update(scores, elapsed)
+        if taken and hasattr(model, "slide_scale"):  # its process noise from now on
+            model.slide_scale = min(1.0, self.slide.factor / WHITE_SHARE**2)
+        return taken or changed
 
     def describe(self, noise: MeasurementNoise) -> dict[str, float | None]:
         """What was learned against the model's ``noise``, for summary.json: the pixel sigma

@@ -9,6 +9,7 @@ out-of-plane angles.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -116,6 +117,7 @@ class MarkerObservation:
         pose: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
         use_depth: bool,
         noise: MeasurementNoise = MeasurementNoise(),
+        slide_of: Callable[[np.ndarray], np.ndarray] | None = None,
     ):
         self.camera = camera
         self.layout_T = np.asarray(layout_points, dtype=float).T.copy()  # (3, 6)
@@ -126,6 +128,9 @@ class MarkerObservation:
         self.R_c0 = np.asarray(R_c0, dtype=float)
         self.t_c0 = np.asarray(t_c0, dtype=float)
         self.pose = pose
+        # states (S, D) -> (S, 3) the MCP markers' common skin slide (hand frame), where the
+        # state carries it (tracking/slide_model.py); its noise is then not modelled here
+        self.slide_of = slide_of
         self.k = 3 if use_depth else 2
         self.noise = noise
         self.model_pixel_sigma = noise.pixel_sigma  # what a suspect blob is taken at
@@ -133,8 +138,11 @@ class MarkerObservation:
         # (J, 3) hand-frame spread of each marker's share in the common skin slide: the
         # model's (slide_base), scaled by what the recording shows (tracking/noise_scale.py)
         self.slide_base = np.zeros((self.n_markers, 3))
+        self.sliding = np.zeros(self.n_markers, dtype=bool)
         if self.n_markers == len(MARKER_NAMES):
-            self.slide_base[list(SLIDING_MARKERS)] = noise.skin_slide
+            self.sliding[list(SLIDING_MARKERS)] = True
+            if slide_of is None:
+                self.slide_base[self.sliding] = noise.skin_slide
         self.slide = self.slide_base.copy()
 
     def scale_slide(self, sd_factor: float) -> None:
@@ -166,7 +174,10 @@ class MarkerObservation:
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""
         R_ch, t_ch = hand_in_camera(*self.pose(X), self.R_c0, self.t_c0)
-        return (R_ch @ self.layout_T).swapaxes(1, 2) + t_ch[:, None, :]
+        pts = (R_ch @ self.layout_T).swapaxes(1, 2) + t_ch[:, None, :]
+        if self.slide_of is not None:
+            pts[:, self.sliding] += (R_ch @ self.slide_of(X)[:, :, None])[:, None, :, 0]
+        return pts
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
         pts = self.marker_points(X)
@@ -197,6 +208,16 @@ class MarkerObservation:
         sliding markers moved one sigma either way (exact for depth, second order for pixels)."""
         return self._slide_jacobian(*self._hand_in_camera(x))
 
+    def as_rigid(self, slide_sd: np.ndarray) -> MarkerObservation:
+        """This observation with the markers where the layout puts them (the slide a state
+        carries left out) and the skin slide as noise of sigmas ``slide_sd`` (3,) the markers
+        share: the recording's slide measured as the model without the state measures it
+        (tracking/noise_scale.py)."""
+        out = copy.copy(self)
+        out.slide_of = None
+        out.slide = np.where(self.sliding[:, None], np.asarray(slide_sd, float)[None, :], 0.0)
+        return out
+
     def registration_jacobian(self, x: np.ndarray) -> np.ndarray:
         """(6*k, 2) change of the measurements at state ``x`` (D,) per standard deviation of the
         colour-depth misregistration along u and v: the depth of the hand's surface plane at each
@@ -221,7 +242,7 @@ class MarkerObservation:
         """The hand's camera-frame rotation (3, 3) and marker centres (6, 3) at state x (D,)."""
         R_rel, p = self.pose(x[None])
         R_ch, t_ch = hand_in_camera(R_rel[0], p[0], self.R_c0, self.t_c0)
-        return R_ch, self.layout_T.T @ R_ch.T + t_ch
+        return R_ch, self.marker_points(x[None])[0]
 
     def _slide_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
         G = np.zeros((self.n_markers, self.k, 3))

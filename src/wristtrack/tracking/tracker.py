@@ -40,7 +40,7 @@ from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.generic_step import fit_covariance, generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
-from wristtrack.tracking.models import MODELS, ConstantRateModel
+from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
 from wristtrack.tracking.results import FrameResult, Status
@@ -74,7 +74,7 @@ class Tracker:
     config: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
-        self.model = MODELS[self.config.model](self.config.process)
+        self.model = self.config.make_model()
         self.assoc_params = replace(self.config.association_params, image_area=self.camera.area)
         self.R_c0: np.ndarray | None = None
         self.t_c0: np.ndarray | None = None
@@ -156,7 +156,6 @@ class Tracker:
             return hypotheses.start(self, det, init)
         return self.start_track(det, init)
 
-
     def _reacquire(self, det: Detections) -> FrameResult | None:
         """A new track fitted to this frame (W0 and layout kept), or None where none fits.
 
@@ -218,7 +217,7 @@ class Tracker:
         if self.R_c0 is None:  # the first initialisation fixes W0 (refined by the still start)
             self.R_c0, self.t_c0 = init.R_ch, init.t_ch
             self.layout = init.layout
-            if type(self.model) is ConstantRateModel:
+            if isinstance(self.model, ConstantRateModel):
                 self._still = StillStart(self.camera, det.timestamp)
         x = self._state_of(init)
         if self._initialisations:  # a fresh fit in W0: its uncertainty as the filter sees it
@@ -259,8 +258,7 @@ class Tracker:
         if use_depth not in self._obs:
             self._obs[use_depth] = MarkerObservation(
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
-                use_depth, self.config.measurement,
-            )
+                use_depth, self.config.measurement, getattr(self.model, "skin_slide", None))
             self.learned_noise.apply(self._obs[use_depth])
         return self._obs[use_depth]
 
