@@ -70,15 +70,18 @@ class ConstantRateModel:
             (np.asarray(R).reshape(9), p, zero if v is None else v, zero if w is None else w)
         )
 
+    # retract and lift as written hold for any Euclidean coordinates after w (a subclass's
+    # extra states: tracking/slide_model.py): the widths are the state's and the tangent's
+
     def retract(self, x: np.ndarray, xi: np.ndarray) -> np.ndarray:
-        out = np.empty((xi.shape[0], 18))
+        out = np.empty((xi.shape[0], x.size))
         R = x[:9].reshape(3, 3)
         out[:, :9] = (so3_exp(xi[:, :3]) @ R).reshape(-1, 9)
         out[:, 9:] = x[9:] + xi[:, 3:]
         return out
 
     def lift(self, x: np.ndarray, X: np.ndarray) -> np.ndarray:
-        out = np.empty((X.shape[0], 12))
+        out = np.empty((X.shape[0], self.dim))
         R_hat_T = x[:9].reshape(3, 3).T
         out[:, :3] = so3_log(X[:, :9].reshape(-1, 3, 3) @ R_hat_T)
         out[:, 3:] = X[:, 9:] - x[9:]

@@ -46,6 +46,7 @@ from wristtrack.filter import ukf
 from wristtrack.tracking import pixel_noise
 from wristtrack.tracking.merged import measurement_map
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.slide_model import SlidingSkinModel
 
 # Memory of the estimate: the fingers' slide changes over a flexion cycle of a few seconds.
 TIME_CONSTANT_S = 2.0
@@ -89,7 +90,7 @@ def slide_scores(model, obs, x: np.ndarray, P: np.ndarray, labels: np.ndarray, d
     are left out (:func:`undoubted`)."""
     labels = undoubted(labels, det)
     taken = labels[labels >= 0]
-    if hasattr(model, "slide_scale"):
+    if isinstance(model, SlidingSkinModel):
         # The state carries the slide (tracking/slide_model.py): its spread is measured as
         # without it, against the layout, where the slide the state followed is in the
         # residuals. (Against the markers moved by it, the residuals hardly show whether the
@@ -196,7 +197,7 @@ class LearnedNoise:
             return changed  # the frame stays due
         elapsed, self._since = self._since, 0.0
         taken = self.slide.update(scores, elapsed)
-        if taken and hasattr(model, "slide_scale"):  # its process noise from now on
+        if taken and isinstance(model, SlidingSkinModel):  # its process noise from now on
             model.slide_scale = min(1.0, self.slide.factor / WHITE_SHARE**2)
         return taken or changed
 

@@ -173,7 +173,11 @@ class MarkerObservation:
 
     def marker_points(self, X: np.ndarray) -> np.ndarray:
         """Marker centres (S, 6, 3) in the camera frame for states X (S, D)."""
-        R_ch, t_ch = hand_in_camera(*self.pose(X), self.R_c0, self.t_c0)
+        return self._placed(X, *hand_in_camera(*self.pose(X), self.R_c0, self.t_c0))
+
+    def _placed(self, X: np.ndarray, R_ch: np.ndarray, t_ch: np.ndarray) -> np.ndarray:
+        """Marker centres (S, 6, 3) of states X (S, D) at their camera-frame poses (R_ch, t_ch)
+        (S, 3, 3), (S, 3): the layout, the MCP markers moved by the state's slide."""
         pts = (R_ch @ self.layout_T).swapaxes(1, 2) + t_ch[:, None, :]
         if self.slide_of is not None:
             pts[:, self.sliding] += (R_ch @ self.slide_of(X)[:, :, None])[:, None, :, 0]
@@ -240,9 +244,8 @@ class MarkerObservation:
 
     def _hand_in_camera(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The hand's camera-frame rotation (3, 3) and marker centres (6, 3) at state x (D,)."""
-        R_rel, p = self.pose(x[None])
-        R_ch, t_ch = hand_in_camera(R_rel[0], p[0], self.R_c0, self.t_c0)
-        return R_ch, self.marker_points(x[None])[0]
+        R_ch, t_ch = hand_in_camera(*self.pose(x[None]), self.R_c0, self.t_c0)
+        return R_ch[0], self._placed(x[None], R_ch, t_ch)[0]
 
     def _slide_jacobian(self, R_ch: np.ndarray, pts: np.ndarray) -> np.ndarray:
         G = np.zeros((self.n_markers, self.k, 3))

@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 
-from wristtrack.geometry import so3_exp, so3_log
 from wristtrack.tracking.models import ConstantRateModel, ProcessNoise
 from wristtrack.tracking.observation import SKIN_SLIDE_SIGMA
 
@@ -68,18 +67,6 @@ class SlidingSkinModel(ConstantRateModel):
     def initial_state(R: np.ndarray, p: np.ndarray, v=None, w=None, s=None) -> np.ndarray:
         base = ConstantRateModel.initial_state(R, p, v, w)
         return np.concatenate((base, np.zeros(3) if s is None else s))
-
-    def retract(self, x: np.ndarray, xi: np.ndarray) -> np.ndarray:
-        out = np.empty((xi.shape[0], 21))
-        out[:, :9] = (so3_exp(xi[:, :3]) @ x[:9].reshape(3, 3)).reshape(-1, 9)
-        out[:, 9:] = x[9:] + xi[:, 3:]
-        return out
-
-    def lift(self, x: np.ndarray, X: np.ndarray) -> np.ndarray:
-        out = np.empty((X.shape[0], 15))
-        out[:, :3] = so3_log(X[:, :9].reshape(-1, 3, 3) @ x[:9].reshape(3, 3).T)
-        out[:, 3:] = X[:, 9:] - x[9:]
-        return out
 
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
         out = np.empty_like(X)
