@@ -28,6 +28,15 @@ _UNDISTORT_MAX_ITER = 30
 _UNDISTORT_TOL = 1e-14  # normalised image units (~5e-12 px at f = 525)
 
 
+def distorted(x, y, k1, k2, p1, p2, k3, k4, k5, k6):
+    """OpenCV's distortion of normalised coordinates (x/z, y/z): (x_d, y_d), for scalars (the
+    compiled tracker step, tracking/kernel.py) and arrays alike."""
+    r2 = x * x + y * y
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+            y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+
+
 def _check_number(value: Any, field: str, where: str, *, positive: bool, integer: bool = False):
     """Validated float (or int) of one camera field; ConfigError naming file and field if not."""
     kind = "a positive integer" if integer else "a positive number" if positive else "a number"
@@ -115,7 +124,7 @@ class Camera:
 
     # ---------------------------------------------------------------------------- distortion
 
-    def _coeffs(self) -> tuple[float, ...]:
+    def distortion_terms(self) -> tuple[float, ...]:
         """(k1, k2, p1, p2, k3, k4, k5, k6), zeros for the terms not given."""
         c = tuple(self.dist or ())
         return c + (0.0,) * (8 - len(c))
@@ -130,7 +139,7 @@ class Camera:
     def _distort(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Distorted coordinates (...,2), their Jacobian d(distorted)/d(xy) (...,2,2) and the
         radial factor (...)."""
-        k1, k2, p1, p2, k3, k4, k5, k6 = self._coeffs()
+        k1, k2, p1, p2, k3, k4, k5, k6 = self.distortion_terms()
         x, y = xy[..., 0], xy[..., 1]
         r2 = x * x + y * y
         num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -139,8 +148,7 @@ class Camera:
         d_radial = (
             (k1 + r2 * (2 * k2 + 3 * k3 * r2)) * den - num * (k4 + r2 * (2 * k5 + 3 * k6 * r2))
         ) / den**2  # d radial / d r2
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        xd, yd = distorted(x, y, k1, k2, p1, p2, k3, k4, k5, k6)
         cross = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y  # d xd/dy == d yd/dx
         J = np.stack(
             [
@@ -200,7 +208,7 @@ class Camera:
             with np.errstate(divide="ignore", invalid="ignore"):
                 xy = p[..., :2] / z
         if self.has_distortion:
-            xy = self._distort(xy)[0]
+            xy = np.stack(distorted(xy[..., 0], xy[..., 1], *self.distortion_terms()), -1)
         return xy * np.array([self.fx, self.fy]) + np.array([self.cx, self.cy])
 
     def normalize(self, uv: np.ndarray) -> np.ndarray:

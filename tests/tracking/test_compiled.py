@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -40,26 +41,38 @@ def step():
     return kernel
 
 
-def _initialised_tracker(seed: int) -> Tracker:
-    """A tracker initialised on a simulated recording (W0 and the layout fixed)."""
+# a real Xtion's lens (../shared/realdata/README.md), and one with every term OpenCV has
+XTION_LENS = (0.033, -0.108, 0.0, 0.0, 0.0)
+RATIONAL_LENS = (0.08, -0.2, 1e-3, -2e-3, 0.05, 0.02, -0.01, 0.01)
+
+
+def _initialised_tracker(seed: int, follow_slide: bool = False, lens=None) -> Tracker:
+    """A tracker initialised on a simulated recording (W0 and the layout fixed); with the skin
+    slide in its state where ``follow_slide``, a camera with distortion ``lens``."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario("deviation", rng=rng)
+    camera = replace(camera, dist=lens)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
-    tracker = Tracker(camera, layout, TrackerConfig())
+    tracker = Tracker(camera, layout, TrackerConfig(follow_slide=follow_slide))
     assert tracker.step(frames[0].detections).has_estimate
     return tracker
 
 
-def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0)):
+def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0), slide=False):
     """A random state, covariance and interval, and blobs of markers near the prediction with
     misses, clutter and sometimes a blob crowding a marker (two markers then may want one).
-    ``turn``: a rotation vector (W0 axes) the random orientation is drawn about."""
+    ``turn``: a rotation vector (W0 axes) the random orientation is drawn about; ``slide``: the
+    state carries the skin slide (SlidingSkinModel's, a few mm) too."""
     scales = np.repeat([3e-4, 4e-6, 2.5e-3, 0.09], 3)  # rad^2, m^2, (m/s)^2, (rad/s)^2
     R = Rotation.from_rotvec(np.asarray(turn) + rng.normal(0, 0.3, 3)).as_matrix()
     x = ConstantRateModel.initial_state(
         R, rng.normal(0, 0.03, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1.0, 3)
     )
-    A = rng.standard_normal((12, 12)) * np.sqrt(scales / 12)[:, None] * rng.uniform(0.1, 3)
+    if slide:
+        scales = np.concatenate((scales, [2e-6, 3e-7, 3e-7]))  # m^2
+        x = np.concatenate((x, rng.normal(0, [1.5e-3, 5e-4, 5e-4])))
+    n = scales.size
+    A = rng.standard_normal((n, n)) * np.sqrt(scales / n)[:, None] * rng.uniform(0.1, 3)
     P = A @ A.T + np.diag(scales) * 0.05
     dt = rng.uniform(0.01, 0.07)
     moved = x.copy()
@@ -81,9 +94,15 @@ def _blob_var(obs, det: Detections) -> np.ndarray:
     return obs.blob_variance(det.suspect, det.count)
 
 
-def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
-    """Suspect blobs among them, taken at the model's pixel sigma above a learned one."""
-    tracker = _initialised_tracker(seed=7)
+@pytest.mark.parametrize(("follow_slide", "lens"),
+                         [(False, None), (True, None), (False, XTION_LENS), (True, RATIONAL_LENS)])
+def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, follow_slide, lens):
+    """Suspect blobs among them, taken at the model's pixel sigma above a learned one; with
+    and without the skin slide in the state (its spread learned to half the model's) and lens
+    distortion."""
+    tracker = _initialised_tracker(seed=7, follow_slide=follow_slide, lens=lens)
+    if follow_slide:
+        tracker.model.slide_scale = 0.5
     obs = tracker._observation(True)
     obs.set_pixel_sigma(0.1)
     assert obs.suspect_variance == pytest.approx(0.3**2 - 0.1**2)
@@ -93,7 +112,7 @@ def test_compiled_step_equals_the_generic_step_on_400_random_frames(step):
     rng = np.random.default_rng(8)
     outcomes = {compiled.OK: 0, compiled.DECLINED: 0}
     for _ in range(400):
-        det, x, P, dt = _random_frame(rng, obs)
+        det, x, P, dt = _random_frame(rng, obs, slide=follow_slide)
         code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth,
                                                      _blob_var(obs, det), *args)
         outcomes[code] += 1
@@ -185,9 +204,25 @@ def _assert_same_results(first, second) -> None:
             assert a.nis == pytest.approx(b.nis, rel=REL, nan_ok=True)
 
 
-@pytest.mark.parametrize("name", ["pronation", "mix"])
-def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name):
-    """Acceptance noise: clutter, misses, an occlusion, irregular frame intervals."""
+def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2) -> list:
+    """Track scenario ``name`` (acceptance noise) as seen through a lens with distortion
+    ``lens`` (None: a pinhole)."""
+    rng = np.random.default_rng(seed)
+    truth, camera, layout = scenario(name, rng=rng)
+    camera = replace(camera, dist=lens)
+    frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
+    tracker = Tracker(camera, layout, config)
+    return [tracker.step(f.detections) for f in frames]
+
+
+@pytest.mark.parametrize(("name", "follow_slide", "lens"), [
+    ("pronation", False, None), ("mix", False, None), ("mix", True, None),
+    ("mix", False, XTION_LENS), ("pronation", True, XTION_LENS),
+])  # fmt: skip
+def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, follow_slide,
+                                                        lens):
+    """Acceptance noise: clutter, misses, an occlusion, irregular frame intervals; with the
+    skin slide in the state, its spread learned as the track goes; through a real lens."""
     taken = []
     compiled_frame = Tracker._compiled_frame
 
@@ -197,11 +232,12 @@ def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name)
         return out
 
     monkeypatch.setattr(Tracker, "_compiled_frame", counted)
-    fast = track_scenario(name, TrackerConfig(), seed=2)
+    config = TrackerConfig(follow_slide=follow_slide)
+    fast = _tracked(name, config, lens)
     assert sum(taken) > 0.9 * len(taken)  # the compiled step took nearly every frame
     monkeypatch.setattr(Tracker, "_compiled_frame", lambda self, det, track, dt: None)
-    generic = track_scenario(name, TrackerConfig(), seed=2)
-    _assert_same_results(fast.results, generic.results)
+    generic = _tracked(name, config, lens)
+    _assert_same_results(fast, generic)
 
 
 def _without_numba(monkeypatch) -> None:

@@ -35,6 +35,8 @@ from wristtrack.tracking.kernel import (
     _DEPTH_OBLIQUE,
     _DEPTH_OFFSET,
     _DEPTH_Z0,
+    _DIST,
+    _DISTORTED,
     _FACING_COS,
     _FX,
     _FY,
@@ -46,6 +48,8 @@ from wristtrack.tracking.kernel import (
     _PIXEL_VAR,
     _REGISTRATION_PX,
     _SCALE,
+    _SLIDE_TAU,
+    _SLIDE_VAR,
     _SQRT_QA,
     _SQRT_QW,
     _U_MAX,
@@ -53,13 +57,17 @@ from wristtrack.tracking.kernel import (
     DECLINED,
     OK,
 )
+from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.observation import GRAZING_COS
+from wristtrack.tracking.slide_model import SlidingSkinModel
 
 if TYPE_CHECKING:
-    from wristtrack.tracking.models import ConstantRateModel
     from wristtrack.tracking.observation import MarkerObservation
 
-__all__ = ["DECLINED", "OK", "describe", "frame_constants", "load"]
+__all__ = ["DECLINED", "MODELS", "OK", "describe", "frame_constants", "load"]
+
+# The state models the step carries (exactly these: a subclass may change what they compute)
+MODELS = (ConstantRateModel, SlidingSkinModel)
 
 
 def frame_constants(
@@ -70,9 +78,10 @@ def frame_constants(
     assoc_params: assoc.AssociationParams,
     merged_blobs: bool = True,
 ) -> tuple:
-    """The step's arguments after (x, P, dt, uv, depth) for one tracker (fixed W0 and layout):
-    layout (J, 3), its skin slide (J, 3), R_c0, t_c0, the unscented weights and the scalar
-    constants ``par``. ``merged_blobs``: TrackerConfig.merged_blobs (the step leaves frames
+    """The step's arguments after (x, P, dt, uv, depth, blob_var) for one tracker (fixed W0 and
+    layout): layout (J, 3), its skin slide taken as noise (J, 3), the markers the state's slide
+    moves (J,) (none without a SlidingSkinModel), R_c0, t_c0, the unscented weights and the
+    scalar constants ``par``. ``merged_blobs``: TrackerConfig.merged_blobs (the step leaves frames
     where blobs may have merged to the generic path)."""
     n = model.dim + model.noise_dim
     w = ukf.sigma_weights(n, ukf_params.alpha, ukf_params.beta, ukf_params.kappa)
@@ -92,11 +101,19 @@ def frame_constants(
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     par[_MERGE_REACH] = merged.merge_reach(camera.fx) if merged_blobs else 0.0
+    sliding = np.zeros(obs.n_markers)
+    par[_DISTORTED] = float(camera.has_distortion)
+    par[_DIST:_DIST + 8] = camera.distortion_terms()
+    par[_SLIDE_TAU], par[_SLIDE_VAR:_SLIDE_VAR + 3] = 1.0, 0.0
+    if isinstance(model, SlidingSkinModel):  # its slide_scale too is learned: made again then
+        sliding[obs.sliding] = 1.0
+        par[_SLIDE_TAU] = model.time_constant
+        par[_SLIDE_VAR:_SLIDE_VAR + 3] = model.stationary_variance
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
     # The tracker makes these again whenever the noise it learns changes (tracking/noise_scale.py)
     layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)
     R_c0, t_c0 = np.ascontiguousarray(obs.R_c0), np.ascontiguousarray(obs.t_c0)
-    return layout, slide, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
+    return layout, slide, sliding, R_c0, t_c0, w.mean.copy(), w.cov.copy(), par
 
 
 # ----------------------------------------------------------------------------- loading
@@ -157,12 +174,12 @@ def _jit(numba) -> Callable:
     _kernel_step = numba.njit(nogil=True, error_model="numpy")(kernel.step)
     digest = _code_digest(functions)
 
-    def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
+    def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, wc, par):
         if digest < 0:  # never: the digest is there to be part of the cache key
-            return _kernel_step(x, P, -dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm,
-                                wc, par)
-        return _kernel_step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc,
-                            par)
+            return _kernel_step(x, P, -dt, uv, depth, blob_var, layout, slide, sliding, R_c0,
+                                t_c0, wm, wc, par)
+        return _kernel_step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0,
+                            wm, wc, par)
 
     try:
         return numba.njit(cache=True, nogil=True, error_model="numpy")(step)
@@ -196,7 +213,7 @@ def _warm_up_arguments() -> tuple:
     dt), so the compile done here is the one every frame uses. The values do not matter."""
     x = np.concatenate((np.eye(3).reshape(9), np.zeros(9)))
     return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros(1), np.zeros((6, 3)),
-            np.zeros((6, 3)), np.eye(3), np.ones(3), np.ones(37), np.ones(37),
+            np.zeros((6, 3)), np.zeros(6), np.eye(3), np.ones(3), np.ones(37), np.ones(37),
             np.ones(_N_PAR))  # fmt: skip
 
 

@@ -27,9 +27,8 @@ class TrackerConfig:
     adapt_pixel: bool = True
     # The default model with the MCP markers' skin slide in its state (tracking/slide_model.py)
     # rather than as noise the markers share afresh each frame: more accurate on hands whose
-    # fingers move (docs/BENCHMARKS.md, spread), a little less on rigid ones, and on the generic
-    # path only (the compiled step has the 12-D state): 2.7x the time per frame on a camera
-    # without lens distortion (with distortion the generic path runs either way).
+    # fingers move (docs/BENCHMARKS.md, spread), a little less on rigid ones; the compiled step
+    # carries it too, at about the same time per frame.
     follow_slide: bool = False
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()

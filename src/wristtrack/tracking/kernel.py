@@ -2,11 +2,12 @@
 
 The same filter as the generic path (tracking/generic_step.py, the reference, which reads like
 the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
-chi-square gate and Cholesky correction, for the constant-rate model with pixel + depth
-measurements (and the noise the markers share: skin slide, misregistration) on an undistorted
-camera. A frame's arrays are tiny (37 sigma points, 12-D
-tangent, 6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost;
-compiled (tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
+chi-square gate and Cholesky correction, for the constant-rate model, with or without the skin
+slide in the state (tracking/slide_model.py), with pixel + depth measurements (and the noise
+the markers share: skin slide, misregistration) on a camera with or without lens distortion.
+A frame's arrays are tiny (37 sigma points and a 12-D tangent, or 49 and 15-D with the slide;
+6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost; compiled
+(tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
 (tests/tracking/test_compiled.py).
 
 Only the common frame is handled here. ``step`` returns DECLINED, having changed nothing, where
@@ -25,6 +26,7 @@ import math
 
 import numpy as np
 
+from wristtrack.camera import distorted
 from wristtrack.depth_noise import depth_sigma, oblique_sigma
 from wristtrack.geometry import (
     quat_exp_into,
@@ -32,6 +34,7 @@ from wristtrack.geometry import (
     quat_of_rotation_into,
     rotation_of_quat_into,
 )
+from wristtrack.tracking.kernel_algebra import cholesky_into, forward_solve_into, moments_into
 
 OK = 0  # the frame is done: the outputs are valid
 DECLINED = 1  # the generic path must take this frame (see the module's docstring)
@@ -40,98 +43,69 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
 (
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
-    _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _N_PAR,
-) = range(22)  # fmt: skip
-
-
-# ------------------------------------------------------------------------ small helpers
-# LAPACK's dpotrf and a triangular solve on the tiny blocks of one frame, where a call into
-# LAPACK would cost more than the arithmetic.
-
-
-def _cholesky(A, L):
-    """Lower Cholesky factor of A (n, n) (from its lower triangle) into L (n, n), zeros above
-    the diagonal; False where A is not positive definite (or has a NaN), as LAPACK's dpotrf
-    reports it."""
-    n = A.shape[0]
-    for j in range(n):
-        for i in range(j):
-            L[i, j] = 0.0
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-    return True
-
-
-def _forward(L, B):
-    """B <- L^-1 B in place, L (n, n) lower triangular, B (n, c)."""
-    n, c = B.shape
-    for i in range(n):
-        d = L[i, i]
-        for col in range(c):
-            t = B[i, col]
-            for k in range(i):
-                t -= L[i, k] * B[k, col]
-            B[i, col] = t / d
+    _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _SLIDE_TAU, _DISTORTED,
+    _N_SCALARS,
+) = range(24)  # fmt: skip
+_SLIDE_VAR = _N_SCALARS  # the slide's stationary variances (3)
+_DIST = _SLIDE_VAR + 3  # the lens distortion, Camera's (k1, k2, p1, p2, k3, k4, k5, k6)
+_N_PAR = _DIST + 8
 
 
 # --------------------------------------------------------------------------- the step
 
 
-def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
+def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, wc, par):
     """One tracking frame: (code, x, P, labels, markers associated, NIS); see the module.
 
-    x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance; dt the step;
+    x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance, or with the skin
+    slide in the state (tracking/slide_model.py) x (21,) [..., s] and P (15, 15); dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
     each blob adds to its marker's in the update (generic_step._blob_variance); layout (J, 3) the
-    markers in the hand frame; slide (J, 3) each marker's share in the common skin slide
-    (MarkerObservation.slide); R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented
-    weights, S = 37 sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
+    markers in the hand frame; slide (J, 3) each marker's share in the common skin slide taken
+    as noise (MarkerObservation.slide); sliding (J,) 1 for the markers the state's slide moves,
+    else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (49 with
+    the slide) sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
     weights of all but the first are equal, so this is ukf.sigma_offsets' set); par the
     constants (``compiled.frame_constants``).
     """
-    n, M, m = 12, uv.shape[0], 3 * layout.shape[0]
+    n, M, m = P.shape[0], uv.shape[0], 3 * layout.shape[0]
     labels = np.empty(M, dtype=np.int64)
     for i in range(M):
         labels[i] = -1
-    x_out = np.empty(18)
+    x_out = np.empty(x.shape[0])
     P_out = np.empty((n, n))
     L = np.empty((n, n))
-    if not _cholesky(P, L):
+    if not cholesky_into(P, L):
         return DECLINED, x_out, P_out, labels, 0, np.nan
 
     # predict: W holds one row per sigma point, columns [0, m) its measurements, axis-major
-    # (u of each marker, then v, then z), columns [m, m + 12) its lift about the propagated centre
+    # (u of each marker, then v, then z), columns [m, m + n) its lift about the propagated centre
     qs = np.empty(4)  # the state's orientation
     qc = np.empty(4)  # the centre's turn over dt
     W = np.empty((wm.shape[0], m + n))
-    _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W)
+    _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W)
     mean = np.empty(m + n)
     C = np.empty((m + n, m + n))
-    _moments(W, wm, wc, mean, C)
-    q = np.empty(4)  # the predicted orientation, pvw its p, v, w
+    moments_into(W, wm, wc, mean, C)
+    q = np.empty(4)  # the predicted orientation, pvw its p, v, w, sl its slide (zeros: none)
     pvw = np.empty(9)
-    _predicted(x, dt, mean[m:], qs, qc, q, pvw)
+    sl = np.zeros(3)
+    _predicted(x, dt, mean[m:], qs, qc, par, q, pvw, sl)
+    placed = np.empty(layout.shape)  # the predicted markers in the hand frame, slid
+    for j in range(layout.shape[0]):
+        for i in range(3):
+            placed[j, i] = layout[j, i] + sliding[j] * sl[i]
     facing = np.empty(layout.shape[0])
-    if not _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
+    if not _all_visible(q, pvw, placed, R_c0, t_c0, par, facing):
         return DECLINED, x_out, P_out, labels, 0, np.nan
 
     # associate
     _add_noise(C, mean, facing, par)  # C's measurement block: Pyy + each blob's noise
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
-    if n_pairs < 0 or _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
+    if n_pairs < 0 or _may_merge(q, pvw, placed, R_c0, t_c0, mean, blob_of, par):
         return DECLINED, x_out, P_out, labels, 0, np.nan
-    _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par)  # and now Pyy + R
+    _add_shared_noise(C, q, pvw, placed, slide, R_c0, t_c0, par)  # and now Pyy + R
 
     # update
     nis = np.nan
@@ -140,30 +114,34 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, R_c0, t_c0, wm, wc, par):
             for j in range(n):
                 P_out[i, j] = 0.5 * (C[m + i, m + j] + C[m + j, m + i])
     else:
-        nis = _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out)
+        nis = _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, P_out)
         if nis != nis:
             return DECLINED, x_out, P_out, labels, 0, np.nan
-    _write_state(q, pvw, x_out)
+    _write_state(q, pvw, sl, x_out)
     return OK, x_out, P_out, labels, n_pairs, nis
 
 
-def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
+def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     """The augmented sigma points retracted, propagated, measured and lifted (the rows of W),
-    as ConstantRateModel.retract, propagate and lift and MarkerObservation.__call__; qs, qc get
-    the state's orientation and the centre's turn."""
-    J, n, S = layout.shape[0], 12, W.shape[0]
+    as ConstantRateModel.retract, propagate and lift (SlidingSkinModel's where n is 15) and
+    MarkerObservation.__call__; qs, qc get the state's orientation and the centre's turn."""
+    J, n, S = layout.shape[0], L.shape[0], W.shape[0]
     m = 3 * J
+    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), then the slide's (3)
+    keep = math.exp(-dt / par[_SLIDE_TAU])  # the slide's share left after dt
+    sq_s = np.empty(3)  # its innovation's sigmas
+    for i in range(3):
+        sq_s[i] = math.sqrt(par[_SLIDE_VAR + i] * (1.0 - keep * keep))
     scale = par[_SCALE]
     sqdt = math.sqrt(dt)
     sa_v = par[_SQRT_QA] * sqdt  # velocity change per unit noise offset: sqrt(q_a / dt) dt
     sa_p = 0.5 * sa_v * dt  # position change: sqrt(q_a / dt) dt^2 / 2
     sw_w = par[_SQRT_QW] * sqdt
     sw_turn = 0.5 * sw_w * dt  # the midpoint rate's share of the turn
-    fx, fy, cx, cy = par[_FX], par[_FY], par[_CX], par[_CY]
     quat_of_rotation_into(x, qs)
     quat_exp_into(x[15] * dt, x[16] * dt, x[17] * dt, qc)  # the centre turns by w dt
     qc[1:] = -qc[1:]  # conj(q_centre): sigma rotations relative to the centre's
-    off = np.empty(n + 6)  # the sigma point's tangent offset and noise offset
+    off = np.empty(n + nq)  # the sigma point's tangent offset and noise offset
     r = np.empty(4)
     t = np.empty(4)
     tr = np.empty(4)
@@ -171,7 +149,7 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
     R = np.empty((3, 3))
     for s in range(S):
         # 0, +scale L[:, k], -scale L[:, k], +noise, -noise (noise in units of its sigma)
-        for i in range(n + 6):
+        for i in range(n + nq):
             off[i] = 0.0
         if 1 <= s <= n:
             for i in range(n):
@@ -179,22 +157,30 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
         elif n < s <= 2 * n:
             for i in range(n):
                 off[i] = -scale * L[i, s - 1 - n]
-        elif 2 * n < s <= 2 * n + 6:
+        elif 2 * n < s <= 2 * n + nq:
             off[s - 1 - n] = scale
-        elif s > 2 * n + 6:
-            off[s - 7 - n] = -scale
-        # lifts of p, v, w: the propagated point minus the propagated centre (the state cancels)
+        elif s > 2 * n + nq:
+            off[s - 1 - n - nq] = -scale
+        # lifts of p, v, w (and s): the propagated point minus the propagated centre (the
+        # state cancels)
         for i in range(3):
-            W[s, m + 3 + i] = off[3 + i] + dt * off[6 + i] + sa_p * off[12 + i]
-            W[s, m + 6 + i] = off[6 + i] + sa_v * off[12 + i]
-            W[s, m + 9 + i] = off[9 + i] + sw_w * off[15 + i]
+            W[s, m + 3 + i] = off[3 + i] + dt * off[6 + i] + sa_p * off[n + i]
+            W[s, m + 6 + i] = off[6 + i] + sa_v * off[n + i]
+            W[s, m + 9 + i] = off[9 + i] + sw_w * off[n + 3 + i]
+        sx = sy = sz = 0.0  # the point's slide, propagated
+        if n > 12:
+            for i in range(3):
+                W[s, m + 12 + i] = keep * off[12 + i] + sq_s[i] * off[n + 6 + i]
+            sx = keep * x[18] + W[s, m + 12]
+            sy = keep * x[19] + W[s, m + 13]
+            sz = keep * x[20] + W[s, m + 14]
         # orientation t r q_state: retraction r = exp(dphi), turn t = exp(dt (w + dw) + the
         # midpoint share of the angular acceleration)
         quat_exp_into(off[0], off[1], off[2], r)
         quat_exp_into(
-            dt * (x[15] + off[9]) + sw_turn * off[15],
-            dt * (x[16] + off[10]) + sw_turn * off[16],
-            dt * (x[17] + off[11]) + sw_turn * off[17],
+            dt * (x[15] + off[9]) + sw_turn * off[n + 3],
+            dt * (x[16] + off[10]) + sw_turn * off[n + 4],
+            dt * (x[17] + off[11]) + sw_turn * off[n + 5],
             t,
         )
         quat_mul_into(t, r, tr)
@@ -212,46 +198,31 @@ def _sigma_points(x, L, dt, layout, R_c0, t_c0, par, qs, qc, W):
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
         for j in range(J):
-            a, b, c = layout[j, 0], layout[j, 1], layout[j, 2]
+            a = layout[j, 0] + sliding[j] * sx
+            b = layout[j, 1] + sliding[j] * sy
+            c = layout[j, 2] + sliding[j] * sz
             hx = R[0, 0] * a + R[0, 1] * b + R[0, 2] * c + px
             hy = R[1, 0] * a + R[1, 1] * b + R[1, 2] * c + py
             hz = R[2, 0] * a + R[2, 1] * b + R[2, 2] * c + pz
             X = R_c0[0, 0] * hx + R_c0[0, 1] * hy + R_c0[0, 2] * hz + t_c0[0]
             Y = R_c0[1, 0] * hx + R_c0[1, 1] * hy + R_c0[1, 2] * hz + t_c0[1]
             Z = R_c0[2, 0] * hx + R_c0[2, 1] * hy + R_c0[2, 2] * hz + t_c0[2]
-            W[s, j] = (fx * X + cx * Z) / Z
-            W[s, J + j] = (fy * Y + cy * Z) / Z
+            W[s, j], W[s, J + j] = _pixel(X, Y, Z, par)
             W[s, 2 * J + j] = Z
     qc[1:] = -qc[1:]
 
 
-def _moments(W, wm, wc, mean, C):
-    """Weighted means of W's columns (one row per sigma point) and their covariance; W is
-    centred in place. The covariance is accumulated point by point, so the innermost loop runs
-    along contiguous rows with no reduction in it (a dependency chain of one long sum per entry
-    would cost several times more)."""
-    S, rows = W.shape
-    for r in range(rows):
-        mean[r] = 0.0
-    for s in range(S):
-        for r in range(rows):
-            mean[r] += W[s, r] * wm[s]
-    for r in range(rows):
-        for c in range(rows):
-            C[r, c] = 0.0
-    for s in range(S):
-        for r in range(rows):
-            W[s, r] -= mean[r]
-        for r in range(rows):
-            a = W[s, r] * wc[s]
-            for c in range(r + 1):
-                C[r, c] += a * W[s, c]
-    for r in range(rows):
-        for c in range(r):
-            C[c, r] = C[r, c]
+def _pixel(X, Y, Z, par):
+    """Camera.project of the camera-frame point (X, Y, Z): (u, v)."""
+    x, y = X / Z, Y / Z
+    if par[_DISTORTED] != 0.0:
+        d = _DIST
+        x, y = distorted(x, y, par[d], par[d + 1], par[d + 2], par[d + 3], par[d + 4],
+                         par[d + 5], par[d + 6], par[d + 7])
+    return par[_FX] * x + par[_CX], par[_FY] * y + par[_CY]
 
 
-def _predicted(x, dt, lift, qs, qc, q, pvw):
+def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl):
     """The predicted state: the mean lift retracted about the propagated centre."""
     g = np.empty(4)
     e = np.empty(4)
@@ -262,6 +233,10 @@ def _predicted(x, dt, lift, qs, qc, q, pvw):
         pvw[i] = x[9 + i] + dt * x[12 + i] + lift[3 + i]
         pvw[3 + i] = x[12 + i] + lift[6 + i]
         pvw[6 + i] = x[15 + i] + lift[9 + i]
+    if lift.shape[0] > 12:
+        keep = math.exp(-dt / par[_SLIDE_TAU])
+        for i in range(3):
+            sl[i] = keep * x[18 + i] + lift[12 + i]
 
 
 def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
@@ -288,8 +263,7 @@ def _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
         if not Z > 0:
             return False
         facing[j] = -(X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]) / math.sqrt(X * X + Y * Y + Z * Z)
-        u = X / Z * par[_FX] + par[_CX]
-        v = Y / Z * par[_FY] + par[_CY]
+        u, v = _pixel(X, Y, Z, par)
         if not (facing[j] > par[_FACING_COS] and -0.5 <= u < par[_U_MAX]
                 and -0.5 <= v < par[_V_MAX]):
             return False
@@ -354,8 +328,10 @@ def _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par):
             if s == 0.0:
                 continue
             dx, dy, dz = Rc[0, i] * s, Rc[1, i] * s, Rc[2, i] * s
-            G[j, i] = 0.5 * par[_FX] * ((X + dx) / (Z + dz) - (X - dx) / (Z - dz))
-            G[J + j, i] = 0.5 * par[_FY] * ((Y + dy) / (Z + dz) - (Y - dy) / (Z - dz))
+            u_plus, v_plus = _pixel(X + dx, Y + dy, Z + dz, par)
+            u_minus, v_minus = _pixel(X - dx, Y - dy, Z - dz, par)
+            G[j, i] = 0.5 * (u_plus - u_minus)
+            G[J + j, i] = 0.5 * (v_plus - v_minus)
             G[2 * J + j, i] = dz
         # the misregistration: the surface plane's depth one sigma off the blob in u and in v
         d = X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]
@@ -392,14 +368,14 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
         for a in range(3):
             for b in range(3):
                 B[a, b] = C[a * J + j, b * J + j]
-        if not _cholesky(B, Lb):
+        if not cholesky_into(B, Lb):
             return -1
         best, best_d = 0, np.inf
         for i in range(M):
             d[0, 0] = uv[i, 0] - mean[j]
             d[1, 0] = uv[i, 1] - mean[J + j]
             d[2, 0] = depth[i] - mean[2 * J + j]
-            _forward(Lb, d)
+            forward_solve_into(Lb, d)
             h = 0.5 * (d[0, 0] * d[0, 0] + d[1, 0] * d[1, 0] + d[2, 0] * d[2, 0])
             if h != h:
                 return -1
@@ -415,12 +391,12 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
     return n_pairs
 
 
-def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out):
+def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, P_out):
     """ukf.update with the associated markers' rows (axis-major, in marker order), their
-    blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw);
+    blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw, sl);
     P_out gets the covariance. Returns the NIS, NaN where the innovation covariance is not
     positive definite."""
-    J, n = blob_of.shape[0], 12
+    J, n = blob_of.shape[0], P_out.shape[0]
     m = 3 * J
     k = 3 * n_pairs
     rows = np.empty(k, dtype=np.int64)
@@ -444,9 +420,9 @@ def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out):
         for c in range(n):
             Ae[i, c] = C[rows[i], m + c]
     Ls = np.empty((k, k))
-    if not _cholesky(Sub, Ls):
+    if not cholesky_into(Sub, Ls):
         return np.nan
-    _forward(Ls, Ae)
+    forward_solve_into(Ls, Ae)
     # [A | e]^T [A | e]: K S K^T = A^T A, the correction K nu = A^T e, the NIS e^T e
     G = np.empty((n + 1, n + 1))
     for i in range(n + 1):
@@ -471,11 +447,13 @@ def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, P_out):
     q[:] = g
     for i in range(9):
         pvw[i] += G[3 + i, n]
+    for i in range(n - 12):
+        sl[i] += G[12 + i, n]
     return G[n, n]
 
 
-def _write_state(q, pvw, out):
-    """out = [R(q / |q|) row-major, p, v, w]."""
+def _write_state(q, pvw, sl, out):
+    """out = [R(q / |q|) row-major, p, v, w] (and the slide s where out has room)."""
     s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for i in range(4):
         q[i] *= s
@@ -486,12 +464,14 @@ def _write_state(q, pvw, out):
             out[3 * i + j] = R[i, j]
     for i in range(9):
         out[9 + i] = pvw[i]
+    for i in range(out.shape[0] - 18):
+        out[18 + i] = sl[i]
 
 
 # the functions ``step`` calls, compiled under these names before it (compiled._jit)
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
-    "depth_sigma", "oblique_sigma", "_cholesky", "_forward", "_sigma_points", "_moments",
-    "_predicted", "_camera_pose", "_all_visible", "_may_merge", "_add_noise",
-    "_add_shared_noise", "_associate", "_correct", "_write_state",
+    "depth_sigma", "oblique_sigma", "distorted", "cholesky_into", "forward_solve_into",
+    "_sigma_points", "_pixel", "moments_into", "_predicted", "_camera_pose", "_all_visible",
+    "_may_merge", "_add_noise", "_add_shared_noise", "_associate", "_correct", "_write_state",
 )  # fmt: skip

@@ -392,10 +392,9 @@ class Tracker:
         cfg = self.config
         if self._compiled_usable is None:
             self._compiled_usable = (
-                type(self.model) is ConstantRateModel
+                type(self.model) in compiled.MODELS
                 and cfg.association == "gnn"
                 and cfg.use_depth
-                and not self.camera.has_distortion
                 and compiled.load() is not None
             )
         if self._compiled_usable and self._compiled is None:
