@@ -69,8 +69,8 @@ def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0), slide=False):
         R, rng.normal(0, 0.03, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1.0, 3)
     )
     if slide:
-        scales = np.concatenate((scales, [2e-6, 3e-7, 3e-7]))  # m^2
-        x = np.concatenate((x, rng.normal(0, [1.5e-3, 5e-4, 5e-4])))
+        scales = np.concatenate((scales, [2e-6, 3e-7]))  # m^2, distal and lateral
+        x = np.concatenate((x, rng.normal(0, [1.5e-3, 5e-4])))
     n = scales.size
     A = rng.standard_normal((n, n)) * np.sqrt(scales / n)[:, None] * rng.uniform(0.1, 3)
     P = A @ A.T + np.diag(scales) * 0.05

@@ -58,7 +58,7 @@ from wristtrack.tracking.kernel import (
     OK,
 )
 from wristtrack.tracking.models import ConstantRateModel
-from wristtrack.tracking.observation import GRAZING_COS
+from wristtrack.tracking.observation import GRAZING_COS, STATE_SLIDE_AXES
 from wristtrack.tracking.slide_model import SlidingSkinModel
 
 if TYPE_CHECKING:
@@ -106,9 +106,11 @@ def frame_constants(
     par[_DIST:_DIST + 8] = camera.distortion_terms()
     par[_SLIDE_TAU], par[_SLIDE_VAR:_SLIDE_VAR + 3] = 1.0, 0.0
     if isinstance(model, SlidingSkinModel):  # its slide_scale too is learned: made again then
+        # the step moves the markers along the hand's first axes, in order
+        assert STATE_SLIDE_AXES == tuple(range(len(STATE_SLIDE_AXES)))
         sliding[obs.sliding] = 1.0
         par[_SLIDE_TAU] = model.time_constant
-        par[_SLIDE_VAR:_SLIDE_VAR + 3] = model.stationary_variance
+        par[_SLIDE_VAR:_SLIDE_VAR + len(STATE_SLIDE_AXES)] = model.stationary_variance
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
     # The tracker makes these again whenever the noise it learns changes (tracking/noise_scale.py)
     layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)

@@ -5,7 +5,7 @@ the paper): augmented UKF prediction with the measurement, one-to-one (GNN) asso
 chi-square gate and Cholesky correction, for the constant-rate model, with or without the skin
 slide in the state (tracking/slide_model.py), with pixel + depth measurements (and the noise
 the markers share: skin slide, misregistration) on a camera with or without lens distortion.
-A frame's arrays are tiny (37 sigma points and a 12-D tangent, or 49 and 15-D with the slide;
+A frame's arrays are tiny (37 sigma points and a 12-D tangent, 45 and 14-D with the slide;
 6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost; compiled
 (tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
 (tests/tracking/test_compiled.py).
@@ -58,13 +58,14 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
     """One tracking frame: (code, x, P, labels, markers associated, NIS); see the module.
 
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance, or with the skin
-    slide in the state (tracking/slide_model.py) x (21,) [..., s] and P (15, 15); dt the step;
+    slide in the state (tracking/slide_model.py) x (18 + k,) [..., s] and P (12 + k, 12 + k), s
+    the slide along the hand's first k axes (observation.STATE_SLIDE_AXES); dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
     each blob adds to its marker's in the update (generic_step._blob_variance); layout (J, 3) the
     markers in the hand frame; slide (J, 3) each marker's share in the common skin slide taken
     as noise (MarkerObservation.slide); sliding (J,) 1 for the markers the state's slide moves,
-    else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (49 with
-    the slide) sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
+    else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (+ 4 k
+    with the slide) sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
     weights of all but the first are equal, so this is ukf.sigma_offsets' set); par the
     constants (``compiled.frame_constants``).
     """
@@ -132,6 +133,7 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     sq_s = np.empty(3)  # its innovation's sigmas
     for i in range(3):
         sq_s[i] = math.sqrt(par[_SLIDE_VAR + i] * (1.0 - keep * keep))
+    sp = np.zeros(3)  # a point's slide, propagated, along the hand's axes
     scale = par[_SCALE]
     sqdt = math.sqrt(dt)
     sa_v = par[_SQRT_QA] * sqdt  # velocity change per unit noise offset: sqrt(q_a / dt) dt
@@ -167,13 +169,9 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             W[s, m + 3 + i] = off[3 + i] + dt * off[6 + i] + sa_p * off[n + i]
             W[s, m + 6 + i] = off[6 + i] + sa_v * off[n + i]
             W[s, m + 9 + i] = off[9 + i] + sw_w * off[n + 3 + i]
-        sx = sy = sz = 0.0  # the point's slide, propagated
-        if n > 12:
-            for i in range(3):
-                W[s, m + 12 + i] = keep * off[12 + i] + sq_s[i] * off[n + 6 + i]
-            sx = keep * x[18] + W[s, m + 12]
-            sy = keep * x[19] + W[s, m + 13]
-            sz = keep * x[20] + W[s, m + 14]
+        for i in range(n - 12):
+            W[s, m + 12 + i] = keep * off[12 + i] + sq_s[i] * off[n + 6 + i]
+            sp[i] = keep * x[18 + i] + W[s, m + 12 + i]
         # orientation t r q_state: retraction r = exp(dphi), turn t = exp(dt (w + dw) + the
         # midpoint share of the angular acceleration)
         quat_exp_into(off[0], off[1], off[2], r)
@@ -198,9 +196,9 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
         for j in range(J):
-            a = layout[j, 0] + sliding[j] * sx
-            b = layout[j, 1] + sliding[j] * sy
-            c = layout[j, 2] + sliding[j] * sz
+            a = layout[j, 0] + sliding[j] * sp[0]
+            b = layout[j, 1] + sliding[j] * sp[1]
+            c = layout[j, 2] + sliding[j] * sp[2]
             hx = R[0, 0] * a + R[0, 1] * b + R[0, 2] * c + px
             hy = R[1, 0] * a + R[1, 1] * b + R[1, 2] * c + py
             hz = R[2, 0] * a + R[2, 1] * b + R[2, 2] * c + pz
@@ -233,10 +231,9 @@ def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl):
         pvw[i] = x[9 + i] + dt * x[12 + i] + lift[3 + i]
         pvw[3 + i] = x[12 + i] + lift[6 + i]
         pvw[6 + i] = x[15 + i] + lift[9 + i]
-    if lift.shape[0] > 12:
-        keep = math.exp(-dt / par[_SLIDE_TAU])
-        for i in range(3):
-            sl[i] = keep * x[18 + i] + lift[12 + i]
+    keep = math.exp(-dt / par[_SLIDE_TAU])
+    for i in range(lift.shape[0] - 12):
+        sl[i] = keep * x[18 + i] + lift[12 + i]
 
 
 def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):

@@ -213,7 +213,7 @@ def reanchor(
     new: HandLayout,
     w0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The default model's state (x (18,), P (12,12); or with the skin slide, (21,), (15,15))
+    """The default model's state (x (18,), P (12,12); or with the skin slide, (20,), (14,14))
     and W0 re-expressed for layout ``new``.
 
     The new hand frame is the old one moved by T (the rigid fit of ``new`` onto ``old``:
@@ -233,10 +233,14 @@ def reanchor(
     pn = T_R.T @ (p + arm - T_t)
     vn = T_R.T @ (v + np.cross(w, arm))
     wn = T_R.T @ w
-    n = P.shape[0]  # 15 with the skin slide: a hand-frame vector, which W0 does not turn
+    # with the skin slide, n = 12 + k: the slide along the hand's first k axes
+    # (observation.STATE_SLIDE_AXES), which W0 does not turn; its share along the others is
+    # noise, not state, and is dropped
+    n = P.shape[0]
     J = np.zeros((n, n))
-    for k in range(n // 3):
+    for k in range(4):
         J[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = T_R.T
+    J[12:, 12:] = T_R.T[: n - 12, : n - 12]
     J[3:6, 0:3] = -T_R.T @ skew(arm)  # a turn of the hand moves the new origin
     Pn = J @ P @ J.T
     w0_cov = np.zeros((6, 6))
@@ -254,6 +258,6 @@ def reanchor(
         rot = np.kron(np.eye(2), R_w.T)  # camera-frame perturbations into W0 axes
         w0_cov = rot @ cov_w @ rot.T
         R_c0n, t_c0n = R_w, t_w
-    slide = [T_R.T @ x[18:21]] if x.size > 18 else []
+    slide = [T_R.T[: n - 12, : n - 12] @ x[18:]]
     xn = np.concatenate((Rn.reshape(9), pn, vn, wn, *slide))
     return xn, 0.5 * (Pn + Pn.T), R_c0n, t_c0n, w0_cov

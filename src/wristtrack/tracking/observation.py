@@ -32,6 +32,12 @@ from wristtrack.hand import MARKER_NAMES
 # sideways as towards the palm) as the spread of the MCP markers' common slide: hand frame
 # (distal X, lateral Y, palmar Z), metres.
 SKIN_SLIDE_SIGMA = (0.0015, 0.0005, 0.0005)
+# The slide's axes a state carries (tracking/slide_model.py): distal and lateral. The palmar
+# slide runs along the line of sight of a hand that faces the camera, where the depth noise
+# (1.3 mm at 0.65 m) dwarfs the whole of it (1 mm at 90 deg flexion): carried in the state, it
+# wandered within its prior, slowly, and was read as a tilt (rendered rigid hands: smoothed range
+# of motion 0.053 -> 0.084 deg). It stays noise the markers share afresh each frame.
+STATE_SLIDE_AXES = (0, 1)
 SLIDING_MARKERS = tuple(j for j, name in enumerate(MARKER_NAMES) if name.startswith("MCP"))
 # A depth map registered to the colour image by the camera's factory calibration is 1-2 px off
 # it (see sim.realism): each marker's depth is read that far from its blob.
@@ -129,7 +135,8 @@ class MarkerObservation:
         self.t_c0 = np.asarray(t_c0, dtype=float)
         self.pose = pose
         # states (S, D) -> (S, 3) the MCP markers' common skin slide (hand frame), where the
-        # state carries it (tracking/slide_model.py); its noise is then not modelled here
+        # state carries it (tracking/slide_model.py) along STATE_SLIDE_AXES; the noise here is
+        # then the slide along the other axes
         self.slide_of = slide_of
         self.k = 3 if use_depth else 2
         self.noise = noise
@@ -141,8 +148,9 @@ class MarkerObservation:
         self.sliding = np.zeros(self.n_markers, dtype=bool)
         if self.n_markers == len(MARKER_NAMES):
             self.sliding[list(SLIDING_MARKERS)] = True
-            if slide_of is None:
-                self.slide_base[self.sliding] = noise.skin_slide
+            self.slide_base[self.sliding] = noise.skin_slide
+            if slide_of is not None:
+                self.slide_base[:, list(STATE_SLIDE_AXES)] = 0.0
         self.slide = self.slide_base.copy()
 
     def scale_slide(self, sd_factor: float) -> None:

@@ -10,13 +10,14 @@ left hand's movement came out at 0.98 deg range-of-motion error with the rendere
 0.64 without it.
 
 The slide follows the fingers, which move over a second or two, so the frames before tell it.
-``SlidingSkinModel`` carries it in the state, three hand-frame coordinates after the
-constant-rate model's (distal X, lateral Y, palmar Z), as a Gauss-Markov (Ornstein-Uhlenbeck)
-process about no slide: its stationary sigmas the measurement model's ``skin_slide`` times
-``slide_scale`` (the recording's, learned as the track goes: tracking/noise_scale.py), its
-correlation time ``TIME_CONSTANT_S``. The observation moves the MCP markers by it
-(``MarkerObservation``'s ``slide_of``); the update then tells pose and slide apart with the
-help of their history, and the smoother with the frames after too.
+``SlidingSkinModel`` carries it in the state, hand-frame coordinates after the constant-rate
+model's (distal X and lateral Y: ``STATE_SLIDE_AXES``; the palmar slide stays noise the markers
+share, tracking/observation.py), as a Gauss-Markov (Ornstein-Uhlenbeck) process about no
+slide: its stationary sigmas the measurement model's ``skin_slide`` times ``slide_scale`` (the
+recording's, learned as the track goes: tracking/noise_scale.py), its correlation time
+``TIME_CONSTANT_S``. The observation moves the MCP markers by it (``MarkerObservation``'s
+``slide_of``); the update then tells pose and slide apart with the help of their history, and
+the smoother with the frames after too.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import math
 import numpy as np
 
 from wristtrack.tracking.models import ConstantRateModel, ProcessNoise
-from wristtrack.tracking.observation import SKIN_SLIDE_SIGMA
+from wristtrack.tracking.observation import SKIN_SLIDE_SIGMA, STATE_SLIDE_AXES
 
 # The slide's correlation time (s). Over a frame at 30 fps the slide's prediction spreads by
 # sigma sqrt(2 dt / tau): 0.12 mm for the 1.5 mm distal sigma, above the renderer's fastest
@@ -40,33 +41,37 @@ TIME_CONSTANT_S = 10.0
 INITIAL_SHARE = 0.1
 
 
-class SlidingSkinModel(ConstantRateModel):
-    """State x = [R (9), p, v, w, s (3)]; tangent [dphi, dp, dv, dw, ds] (15): the
-    constant-rate model and the MCP markers' common skin slide ``s`` (hand frame, m).
-    Noise (9) = (linear acceleration, angular acceleration, the slide's innovation)."""
+_AXES = len(STATE_SLIDE_AXES)
 
-    dim = 15
-    noise_dim = 9
-    slide = slice(12, 15)  # tangent coordinates of the slide (m)
+
+class SlidingSkinModel(ConstantRateModel):
+    """State x = [R (9), p, v, w, s (2)]; tangent [dphi, dp, dv, dw, ds] (14): the
+    constant-rate model and the MCP markers' common skin slide ``s`` along the hand's
+    STATE_SLIDE_AXES (distal, lateral; m). Noise (8) = (linear acceleration, angular
+    acceleration, the slide's innovation)."""
+
+    dim = 12 + _AXES
+    noise_dim = 6 + _AXES
+    slide = slice(12, 12 + _AXES)  # tangent coordinates of the slide (m)
     name = "default"
 
     def __init__(self, noise: ProcessNoise | None = None,
                  slide_sigma: tuple[float, float, float] = SKIN_SLIDE_SIGMA,
                  time_constant: float = TIME_CONSTANT_S):
         super().__init__(ProcessNoise() if noise is None else noise)
-        self.slide_sigma = np.asarray(slide_sigma, dtype=float)
+        self.slide_sigma = np.asarray(slide_sigma, dtype=float)  # (3,) hand X, Y, Z
         self.time_constant = time_constant
         self.slide_scale = 1.0  # the recording's slide against the model's, on the variance
 
     @property
     def stationary_variance(self) -> np.ndarray:
-        """(3,) the slide's stationary variances (m^2) along the hand's axes."""
-        return self.slide_scale * self.slide_sigma**2
+        """The slide's stationary variances (m^2) along the axes the state carries."""
+        return self.slide_scale * self.slide_sigma[list(STATE_SLIDE_AXES)] ** 2
 
     @staticmethod
     def initial_state(R: np.ndarray, p: np.ndarray, v=None, w=None, s=None) -> np.ndarray:
         base = ConstantRateModel.initial_state(R, p, v, w)
-        return np.concatenate((base, np.zeros(3) if s is None else s))
+        return np.concatenate((base, np.zeros(_AXES) if s is None else s))
 
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
         out = np.empty_like(X)
@@ -75,7 +80,7 @@ class SlidingSkinModel(ConstantRateModel):
         return out
 
     def process_noise(self, dt: float) -> np.ndarray:
-        Q = np.zeros((9, 9))
+        Q = np.zeros((self.noise_dim, self.noise_dim))
         Q[:6, :6] = super().process_noise(dt)
         keep = math.exp(-dt / self.time_constant)
         Q[6:, 6:] = np.diag(self.stationary_variance * (1.0 - keep * keep))
@@ -83,14 +88,17 @@ class SlidingSkinModel(ConstantRateModel):
 
     @staticmethod
     def skin_slide(X: np.ndarray) -> np.ndarray:
-        """(S, 3) the slide of states X (S, 21)."""
-        return X[:, 18:21]
+        """(S, 3) the slide (hand frame X, Y, Z) of states X (S, 18 + axes), zero along the
+        axes the state does not carry."""
+        out = np.zeros((X.shape[0], 3))
+        out[:, list(STATE_SLIDE_AXES)] = X[:, 18:]
+        return out
 
     def initial_covariance(self, pose_cov: np.ndarray, v_sigma: float = 0.05,
                            w_sigma: float = 0.3) -> np.ndarray:
         """Covariance over the tangent from a (6,6) pose covariance; the slide at
         INITIAL_SHARE of its stationary sigmas."""
-        P = np.zeros((15, 15))
+        P = np.zeros((self.dim, self.dim))
         P[:12, :12] = super().initial_covariance(pose_cov, v_sigma, w_sigma)
         P[12:, 12:] = np.diag(self.stationary_variance) * INITIAL_SHARE**2
         return P
