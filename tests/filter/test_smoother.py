@@ -56,7 +56,9 @@ def test_state_log_round_trip_and_truncation(tmp_path):
     config = TrackerConfig()
     run = track_scenario("flexion", config, seed=0)
     path = tmp_path / STATES_FILE
-    with StateWriter(path, 18, 12) as writer:
+    D, n = run.results[3].x.size, run.model.dim  # the default's state: 20 with the skin slide
+    assert run.results[3].cov.shape == (n, n)
+    with StateWriter(path, D, n) as writer:
         for r in run.results[:10]:
             writer.write(r.frame, r.timestamp, r)
         writer.write(10, 99.0, None)

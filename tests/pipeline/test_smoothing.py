@@ -22,7 +22,9 @@ def test_the_smoothed_still_start_keeps_its_own_camera_poses(tmp_path):
     noise = NoiseModel(depth_sigma_coeff=4e-3, clutter_mean=0.0)
     frames = simulate_detections(truth, camera, layout, noise, np.random.default_rng(0))[:45]
     tracker = Tracker(camera, layout, TrackerConfig())
-    states = StateWriter(tmp_path / STATES_FILE, 18, 12)
+    model = tracker.model
+    states = StateWriter(tmp_path / STATES_FILE, model.initial_state(np.eye(3), np.zeros(3)).size,
+                         model.dim)
     with PosesWriter(tmp_path / "poses.csv") as poses:
         results = []
         for f in frames:

@@ -104,9 +104,10 @@ def _rigid_frames(name: str, seed: int):
         truth, camera, layout, NoiseModel(pixel_sigma=0.05, clutter_mean=1.0, p_miss=0.05), rng)
 
 
-def _run(truth, camera, layout: HandLayout, frames, name: str, adapt: bool, depth: bool):
+def _run(truth, camera, layout: HandLayout, frames, name: str, adapt: bool, depth: bool,
+         follow_slide: bool = True):
     tracker = Tracker(camera, layout, TrackerConfig(adapt_slide=adapt, adapt_pixel=False,
-                                                    use_depth=depth))
+                                                    use_depth=depth, follow_slide=follow_slide))
     results = [tracker.step(f.detections) for f in frames]
     run = score_run(name, truth, frames, results)
     assert run.errors.coverage == 1.0
@@ -114,15 +115,18 @@ def _run(truth, camera, layout: HandLayout, frames, name: str, adapt: bool, dept
 
 
 @pytest.mark.parametrize("depth", [True, False], ids=["depth", "colour-only"])
-def test_a_hand_whose_skin_does_not_slide_is_tracked_without_one(depth):
+@pytest.mark.parametrize(("follow_slide", "gain"), [(False, 0.93), (True, 0.97)],
+                         ids=["slide-as-noise", "slide-in-state"])
+def test_a_hand_whose_skin_does_not_slide_is_tracked_without_one(depth, follow_slide, gain):
     """Rigid markers: the learned slide falls to its floor, and the orientation is more accurate
-    than with the model's slide kept throughout (whose pattern discounts the pixels' evidence
-    about a flexion tilt): 10-17 % here."""
+    than with the model's slide kept throughout. Taken as noise afresh each frame, the slide's
+    pattern discounts the pixels' evidence about a flexion tilt: 10-17 % here. Carried in the
+    state (the default), the slide moves slowly and costs rigid hands less: 5 % here."""
     truth, camera, layout, frames = _rigid_frames("flexion", 2)
-    fixed, _ = _run(truth, camera, layout, frames, "flexion", False, depth)
-    adapted, sd = _run(truth, camera, layout, frames, "flexion", True, depth)
+    fixed, _ = _run(truth, camera, layout, frames, "flexion", False, depth, follow_slide)
+    adapted, sd = _run(truth, camera, layout, frames, "flexion", True, depth, follow_slide)
     assert sd < 0.2
-    assert adapted < 0.93 * fixed, (adapted, fixed)
+    assert adapted < gain * fixed, (adapted, fixed)
 
 
 def test_a_hand_whose_skin_slides_keeps_its_slide():

@@ -147,8 +147,9 @@ def test_a_rigid_hand_learns_that_its_skin_does_not_slide():
 
 def test_a_fresh_fit_starts_the_slide_narrow_and_the_option_asks_for_the_model():
     """initial_covariance: the pose's block as the constant-rate model's, the slide at
-    INITIAL_SHARE of its stationary sigmas; --follow-slide gives the sliding model, and without
-    a modelled slide (or with the paper's model) there is none to follow."""
+    INITIAL_SHARE of its stationary sigmas; the sliding model is the default (--follow-slide),
+    --no-follow-slide gives the constant-rate model alone, and without a modelled slide (or with
+    the paper's model) there is none to follow."""
     model = SlidingSkinModel(slide_sigma=(0.002, 0.001, 0.001))
     model.slide_scale = 0.25
     pose = np.diag([1e-4] * 3 + [1e-6] * 3)
@@ -158,9 +159,10 @@ def test_a_fresh_fit_starts_the_slide_narrow_and_the_option_asks_for_the_model()
                                0.25 * INITIAL_SHARE**2 * np.array([0.002, 0.001]) ** 2)
     parser = argparse.ArgumentParser()
     add_tracker_options(parser)
-    assert isinstance(tracker_config(parser.parse_args(["--follow-slide"])).make_model(),
-                      SlidingSkinModel)
-    assert type(tracker_config(parser.parse_args([])).make_model()) is ConstantRateModel
+    for args in ([], ["--follow-slide"]):
+        assert isinstance(tracker_config(parser.parse_args(args)).make_model(), SlidingSkinModel)
+    assert type(tracker_config(parser.parse_args(["--no-follow-slide"])).make_model()) is \
+        ConstantRateModel
     rigid = TrackerConfig(follow_slide=True, measurement=MeasurementNoise(skin_slide=(0, 0, 0)))
     assert type(rigid.make_model()) is ConstantRateModel
     assert not isinstance(TrackerConfig.paper(follow_slide=True).make_model(),

@@ -9,7 +9,6 @@ import pytest
 
 from wristtrack.sim.motion import SCENARIOS
 from wristtrack.sim.scenario_run import score_run, track_scenario
-from wristtrack.tracking.models import MODELS
 from wristtrack.tracking.smoothed_results import smooth_results, track_segments
 from wristtrack.tracking.tracker import Status, TrackerConfig
 
@@ -18,7 +17,7 @@ from wristtrack.tracking.tracker import Status, TrackerConfig
 def test_smoothing_reduces_error_on_every_scenario(name):
     config = TrackerConfig()
     run = track_scenario(name, config, seed=2)
-    smoothed = smooth_results(MODELS[config.model](config.process), run.results, config.ukf)
+    smoothed = smooth_results(run.model, run.results, config.ukf)
     after = score_run(name, run.truth, run.frames, smoothed).errors
     assert after.orientation_rmse_deg < 0.85 * run.errors.orientation_rmse_deg
     assert after.position_rmse_mm < 0.85 * run.errors.position_rmse_mm
@@ -46,7 +45,7 @@ def test_each_track_is_smoothed_on_its_own():
         results[i] = replace(results[i], track_id=last_id + 1)
     segments = track_segments(results)
     assert segments[-2][-1] == 59 and (segments[-1][0], segments[-1][-1]) == (64, len(results) - 1)
-    smoothed = smooth_results(MODELS["default"](config.process), results, config.ukf)
+    smoothed = smooth_results(run.model, results, config.ukf)
     for i in gap:
         assert smoothed[i] is results[i]
     # the end of the first track has no future inside its track: unchanged by the smoother

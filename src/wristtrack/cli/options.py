@@ -16,8 +16,8 @@ def positive_int(text: str) -> int:
 
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
-    """--model, --association, --no-depth, --no-skin-depth, --follow-slide and --fixed-noise,
-    read back by :func:`tracker_config`."""
+    """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide and
+    --fixed-noise, read back by :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
@@ -26,10 +26,10 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
         help="use the markers' depth only, not the skin between them (e.g. a gloved or bandaged "
              "hand whose surface moves against the markers)")
     parser.add_argument(
-        "--follow-slide", action="store_true",
-        help="carry the skin's slide over the knuckles in the filter state (hands whose fingers "
-             "move: more accurate at the extremes of turned hands; slower on cameras without "
-             "lens distortion)")
+        "--follow-slide", action=argparse.BooleanOptionalAction, default=True,
+        help="carry the skin's slide over the knuckles in the filter state (the default); "
+             "--no-follow-slide takes it as noise the markers share afresh each frame "
+             "instead")
     parser.add_argument(
         "--fixed-noise", action="store_true",
         help="take the blobs' pixel noise and the skin slide as the model gives them instead of "

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,6 +21,7 @@ class ScenarioRun:
     errors: PoseErrors
     labelling: dict[str, float]
     lost_frames: int  # frames after the first estimate without an estimate
+    model: object = None  # the tracker's state model as the run left it (for the smoother)
 
 
 def track_scenario(
@@ -37,7 +38,7 @@ def track_scenario(
     frames = simulate_detections(truth, camera, layout, noise, rng)
     tracker = Tracker(camera, layout if give_layout else None, config or TrackerConfig())
     results = [tracker.step(f.detections) for f in frames]
-    return score_run(name, truth, frames, results)
+    return replace(score_run(name, truth, frames, results), model=tracker.model)
 
 
 def score_run(

@@ -25,11 +25,10 @@ class TrackerConfig:
     # noise from it (tracking/noise_scale.py, pixel_noise.py); False: the model's throughout.
     adapt_slide: bool = True
     adapt_pixel: bool = True
-    # The default model with the MCP markers' skin slide in its state (tracking/slide_model.py)
-    # rather than as noise the markers share afresh each frame: more accurate on hands whose
-    # fingers move (docs/BENCHMARKS.md, spread), a little less on rigid ones; the compiled step
-    # carries it too, at about the same time per frame.
-    follow_slide: bool = False
+    # The default model with the MCP markers' skin slide along the hand (distal, lateral) in its
+    # state (tracking/slide_model.py); False: the slide as noise the markers share afresh each
+    # frame, where a hand turned edge-on took part of it as a tilt (docs/BENCHMARKS.md, spread).
+    follow_slide: bool = True
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
