@@ -299,10 +299,11 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "motion-capture system would record of the rendered take: 100 Hz, its own lab frame, "
         "clock offset 0.4173 s and ratio 1.0002 (planted), 0.05 mm marker noise per "
         "coordinate; `compare` finds the offset by cross-correlating speeds, then fits offset, "
-        "clock ratio and registration jointly (1 sigma from the Jacobian, inflated for serial "
-        "correlation). Runs tracked with `--smooth`. Transform error 'at the hand' is the "
-        "registration's error where the hand was (a rotation error alone moves the lab image of "
-        "the camera origin 0.65 m away by 1.1 mm per 0.1 deg).",
+        "clock ratio and registration jointly (1 sigma: the larger of the Jacobian's, "
+        "inflated for serial correlation, and a delete-a-block jackknife's). Runs tracked "
+        "with `--smooth`. Transform error 'at the hand' is the registration's error where the "
+        "hand was (a rotation error alone moves the lab image of the camera origin 0.65 m away "
+        "by 1.1 mm per 0.1 deg).",
         "",
         f"- {summary}",
         f"- {summary_lp}",

@@ -46,10 +46,12 @@ def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     it a longer filter step, which the offline run over the same frames takes too, however many
     a busy machine dropped. Not digit for digit: live, the colours are learnt in a thread and
     handed over a frame or two later (pipeline/live/loop.py), which moves the blobs' centres by
-    a fraction of a pixel; on sharp blobs the out-of-plane angles rest on that fraction, so a
-    frame's two orientations agree within ``deg`` or, where larger, its reported 1-sigma
-    uncertainty (the reach's frames 61-67: up to 0.60 deg apart at 0.64 reported, each within
-    0.46 deg of the truth)."""
+    a fraction of a pixel; on sharp blobs the out-of-plane angles rest on that fraction, which
+    acts as a measurement noise of their own on each run. So a frame's two orientations agree
+    within ``deg`` or, where larger, the spread of the difference of two estimates each with the
+    reported 1-sigma uncertainty, sqrt(2) sigma (the reach's frames 61-67: up to 0.65 deg apart
+    at 0.56 reported on a loaded machine that dropped frames, 0.43 at 0.67 on an idle one, each
+    run within 0.3 deg of the truth there)."""
     taken = live["status"] != "dropped"
     cut = cut_recording(reach, np.asarray(live["frame"][taken], int), tmp_path / "taken")
     with FolderRecording(cut) as rec:
@@ -62,7 +64,7 @@ def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     R_live, t_live = rows_to_poses(live)
     R_off, t_off = rows_to_poses(offline)
     ang = np.degrees(rotation_distance(R_live[taken][done], R_off[done]))
-    tolerance = np.maximum(deg, np.asarray(live["rot_sigma_deg"])[taken][done])
+    tolerance = np.maximum(deg, np.sqrt(2.0) * np.asarray(live["rot_sigma_deg"])[taken][done])
     beyond = ang > tolerance
     assert not beyond.any(), np.c_[live["frame"][taken][done], ang, tolerance][beyond]
     err = np.linalg.norm(t_live[taken][done] - t_off[done], axis=1) * 1e3
