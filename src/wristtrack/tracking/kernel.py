@@ -124,11 +124,11 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
 
 def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     """The augmented sigma points retracted, propagated, measured and lifted (the rows of W),
-    as ConstantRateModel.retract, propagate and lift (SlidingSkinModel's where n is 15) and
+    as ConstantRateModel.retract, propagate and lift (SlidingSkinModel's where n > 12) and
     MarkerObservation.__call__; qs, qc get the state's orientation and the centre's turn."""
     J, n, S = layout.shape[0], L.shape[0], W.shape[0]
     m = 3 * J
-    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), then the slide's (3)
+    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), then the slide's (n - 12)
     keep = math.exp(-dt / par[_SLIDE_TAU])  # the slide's share left after dt
     sq_s = np.empty(3)  # its innovation's sigmas
     for i in range(3):
