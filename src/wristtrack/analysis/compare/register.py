@@ -256,8 +256,8 @@ def _uncertainty(prob: _Problem, sol, cluster: bool) -> dict[str, float]:
     out = _sigmas(prob, sol.x, cov * inflate**2, cluster)
     jackknife = _jackknife_covariance(prob, sol.x)
     if jackknife is not None:
-        out = {k: max(v, w) for (k, v), w in
-               zip(out.items(), _sigmas(prob, sol.x, jackknife, cluster).values(), strict=True)}
+        wide = _sigmas(prob, sol.x, jackknife, cluster)
+        out = {k: max(v, wide[k]) for k, v in out.items()}
     return {
         **out,
         "serial_correlation_inflation": inflate,
