@@ -43,6 +43,7 @@ from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
+from wristtrack.tracking.restart import moving_start
 from wristtrack.tracking.results import FrameResult, Status
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
@@ -223,6 +224,9 @@ class Tracker:
         if self._initialisations:  # a fresh fit in W0: its uncertainty as the filter sees it
             P = fit_covariance(self.model, self._observation(det.depth is not None), x, det,
                                init.labels, self.config)
+            old = self._track  # a restart inside a running track: moving as it was
+            if old is not None and det.timestamp - old.timestamp <= LONG_GAP_S:
+                x = moving_start(self.model, x, old.x, det.timestamp - old.timestamp)
         else:  # the first fixes W0; its uncertainty is carried apart (_result)
             # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
             rot = np.kron(np.eye(2), self.R_c0.T)
