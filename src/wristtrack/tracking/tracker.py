@@ -224,7 +224,7 @@ class Tracker:
         if self._initialisations:  # a fresh fit in W0: its uncertainty as the filter sees it
             P = fit_covariance(self.model, self._observation(det.depth is not None), x, det,
                                init.labels, self.config)
-            old = self._track  # a restart inside a running track: moving as it was
+            old = self._track  # restarted within a track: at the velocity since its last frame
             if old is not None and det.timestamp - old.timestamp <= LONG_GAP_S:
                 x = moving_start(self.model, x, old.x, det.timestamp - old.timestamp)
         else:  # the first fixes W0; its uncertainty is carried apart (_result)
