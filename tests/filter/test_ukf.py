@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from wristtrack.filter import ukf
 
@@ -268,3 +269,10 @@ def test_the_iterated_update_on_a_rotation_reaches_the_map_estimate(monkeypatch)
                         lambda m, prior, x1, P1, eps, w: (m.lift(x1, prior[0][None])[0], prior[1]))
     as_it_is = ukf.iterated_update(model, (x0, P0), (once.x, once.P), h, z, R, None, iterations=4)
     assert off(as_it_is.x) > 0.1, off(as_it_is.x)
+
+
+def test_chi2_quantile_is_scipy_stats_chi2_ppf():
+    """The NIS and gate bounds (scipy.special's chdtri, cached) against scipy.stats."""
+    for prob in (0.9, 0.99, 0.999, 0.9999):
+        for dof in (1, 2, 3, 12, 18):
+            assert ukf.chi2_quantile(prob, dof) == pytest.approx(chi2.ppf(prob, dof), rel=1e-10)

@@ -20,11 +20,11 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.special import chdtri
+
+from wristtrack.filter.ukf import chi2_quantile
 
 CLUTTER = -1
 METHODS = ("gnn", "jpda", "paper")
@@ -38,11 +38,6 @@ class AssociationParams:
     gate_prob: float = 0.9999  # chi-square gate: a true marker falls inside with this probability
     image_area: float = 640.0 * 480.0  # px^2
     depth_range: float = 1.7  # m, span of depths a clutter blob may have
-
-
-@lru_cache(maxsize=8)
-def _gate_limit(prob: float, dof: int) -> float:
-    return float(chdtri(dof, 1.0 - prob))  # the chi2 quantile; scipy.stats costs ~1 s to import
 
 
 def log_likelihood_ratios(
@@ -77,7 +72,7 @@ def log_likelihood_ratios(
 def gate(d2: np.ndarray, z: np.ndarray, params: AssociationParams) -> np.ndarray:
     """Which (blob, marker) pairs pass the chi-square gate (M, J); dof 3 with depth, else 2."""
     dof = np.full(z.shape[0], 2) if z.shape[1] == 2 else np.where(np.isfinite(z[:, 2]), 3, 2)
-    limits = np.array([_gate_limit(params.gate_prob, int(d)) for d in (2, 3)])
+    limits = np.array([chi2_quantile(params.gate_prob, int(d)) for d in (2, 3)])
     return d2 <= limits[dof - 2][:, None]
 
 
@@ -166,4 +161,4 @@ def full_measurement_constants(params: AssociationParams) -> tuple[float, float]
         + math.log(density)
         - math.log(params.p_detect / ((1 - params.p_detect) * params.clutter_rate))
     )
-    return constant, 0.5 * _gate_limit(params.gate_prob, 3)
+    return constant, 0.5 * chi2_quantile(params.gate_prob, 3)

@@ -21,6 +21,7 @@ from typing import Protocol
 import numpy as np
 from scipy.linalg.blas import dtrsm
 from scipy.linalg.lapack import dpotrf
+from scipy.special import chdtri
 
 
 class ManifoldModel(Protocol):
@@ -61,6 +62,13 @@ def sigma_weights(
     mean.setflags(write=False)
     cov.setflags(write=False)
     return SigmaWeights(mean, cov, float(np.sqrt(n + lam)))
+
+
+@lru_cache(maxsize=64)
+def chi2_quantile(prob: float, dof: int) -> float:
+    """The chi-square quantile at ``prob`` for ``dof`` degrees of freedom: the NIS and gate
+    bounds (scipy.special, not scipy.stats, which costs ~1 s to import)."""
+    return float(chdtri(dof, 1.0 - prob))
 
 
 def symmetrise(P: np.ndarray) -> np.ndarray:

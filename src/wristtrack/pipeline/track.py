@@ -15,13 +15,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.special import chdtri
 
 from wristtrack.analysis.kinematics import analyse_file
 from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
 from wristtrack.detect.config import DetectorConfig, detector_config
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
+from wristtrack.filter.ukf import chi2_quantile
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.poses import PosesWriter, pose_row
@@ -407,7 +407,7 @@ ADAPT_NIS_QUANTILE = 0.95
 def _confident(result: FrameResult) -> bool:
     labelled = np.unique(result.labels[result.labels >= 0]).size
     return (result.status == Status.TRACKING and labelled >= 4 and result.nis_dof > 0
-            and result.nis <= chdtri(result.nis_dof, 1.0 - ADAPT_NIS_QUANTILE))
+            and result.nis <= chi2_quantile(ADAPT_NIS_QUANTILE, result.nis_dof))
 
 
 def follow_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,

@@ -25,11 +25,11 @@ W0, so tracking goes on without a jump.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import chdtri
 
 from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import ConfigError, InitialisationError, InputError
+from wristtrack.filter.ukf import chi2_quantile
 from wristtrack.geometry import skew
 from wristtrack.hand import HandLayout, average_layout, fit_pose
 from wristtrack.tracking.observation import MeasurementNoise
@@ -50,7 +50,7 @@ STILL_RATE = 0.25  # rad/s
 # ... and tells it from its own noise: a fresh track's velocities are uncertain (0.6 rad/s after
 # its first update), and under realistic depth noise the estimate alone passed STILL_RATE in the
 # first frame and ended a still start of 20 frames after one, leaving W0 2 deg off.
-STILL_SIGNIFICANCE = float(chdtri(3, 0.01))  # chi-square, 3 dof, 0.99 (11.34)
+STILL_SIGNIFICANCE = chi2_quantile(0.99, 3)  # chi-square, 3 dof, 0.99 (11.34)
 
 
 def _moving(velocity: np.ndarray, cov: np.ndarray | None, threshold: float) -> bool:

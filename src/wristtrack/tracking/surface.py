@@ -264,6 +264,24 @@ def near_depth_edges(depth: np.ndarray, depth_scale: float, iv: np.ndarray, iu: 
     return near_side[iv - v0, iu - u0]
 
 
+def skin_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
+                surface: DorsumSurface, depth_image: np.ndarray, noise: MeasurementNoise,
+                settings: SurfaceSettings, camera: Camera,
+                params: ukf.UKFParams) -> tuple[np.ndarray, np.ndarray]:
+    """(x, P) updated with the depth of the skin between the markers, read in the raw depth frame
+    ``depth_image`` at the pose of x (the markers' update's); unchanged where no patch can be
+    read or the update is beyond ``settings.nis_quantile`` (:func:`surface_update`)."""
+    R_ch, t_ch = hand_in_camera(*model.pose(x[None]), R_c0, t_c0)
+    reading = read_patches(camera, surface, R_ch[0], t_ch[0], depth_image, settings,
+                           pixel_rays(camera))
+    if reading is None:
+        return x, P
+    limit = ukf.chi2_quantile(settings.nis_quantile, len(reading.depth))
+    x, P, _, _ = surface_update(model, x, P, R_c0, t_c0, surface, reading, noise, settings, camera,
+                                params, limit)
+    return x, P
+
+
 def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
                    surface: DorsumSurface, reading: PatchReading, noise: MeasurementNoise,
                    settings: SurfaceSettings, camera: Camera, params: ukf.UKFParams,

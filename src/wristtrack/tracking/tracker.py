@@ -25,15 +25,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 
 import numpy as np
-from scipy.special import chdtri
 
 from wristtrack.camera import Camera
 from wristtrack.detect.detections import Detections
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.filter import ukf
+from wristtrack.filter.ukf import chi2_quantile
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose, marker_image_diameter
 from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
@@ -209,7 +208,7 @@ class Tracker:
         return bool(np.median(offset / radius) > 1.0)
 
     def _explains(self, x: np.ndarray, labels: np.ndarray, det: Detections) -> bool:
-        limit = _nis_limit(self.config.nis_quantile, 2 * np.unique(labels[labels >= 0]).size)
+        limit = chi2_quantile(self.config.nis_quantile, 2 * np.unique(labels[labels >= 0]).size)
         return markers_on_blobs(self._observation(False), x, labels, det.uv, limit, det.suspect)
 
     def start_track(self, det: Detections, init: InitResult) -> FrameResult:
@@ -288,7 +287,7 @@ class Tracker:
             return self._empty(det, Status.LOST)
         # Only if its markers are off their blobs: realistic frames have harmless NIS outliers,
         # and a one-frame fit in their place cost accuracy on the preset-real recordings.
-        doubtful = out is not plain or bool(dof and nis > _nis_limit(cfg.nis_quantile, dof))
+        doubtful = out is not plain or bool(dof and nis > chi2_quantile(cfg.nis_quantile, dof))
         off_blobs = doubtful and not self._explains(x, labels, det)
         if (n_assoc < cfg.min_markers or off_blobs) and cfg.reacquire \
                 and det.count >= cfg.min_markers:
@@ -315,7 +314,7 @@ class Tracker:
             self._lose()
             return self._empty(det, Status.LOST)
         if dof and cfg.nis_lost_after:  # frames without an update neither count nor reset
-            high = nis > _nis_limit(cfg.nis_quantile, dof)
+            high = nis > chi2_quantile(cfg.nis_quantile, dof)
             track.inconsistent_frames = track.inconsistent_frames + 1 if high else 0
             if track.inconsistent_frames >= cfg.nis_lost_after:
                 self._lose()  # the estimate no longer explains the markers: start again
@@ -355,29 +354,16 @@ class Tracker:
             out = self._generic_frame(det, track, dt)
         if self.surface is None or det.depth is None or det.depth_image is None or not out[3]:
             return out
-        return (*self._skin_update(out[0], out[1], det.depth_image), *out[2:])
-
-    def _skin_update(self, x: np.ndarray, P: np.ndarray, depth_image: np.ndarray) -> tuple:
-        """(x, P) updated with the depth of the skin between the markers (tracking/surface.py),
-        read at the pose the markers gave; unchanged where no patch can be read."""
-        settings = self.config.surface
-        R_rel, p = self.model.pose(x[None])
-        R_ch, t_ch = hand_in_camera(R_rel[0], p[0], self.R_c0, self.t_c0)
-        reading = surface.read_patches(self.camera, self.surface, R_ch, t_ch, depth_image,
-                                       settings, surface.pixel_rays(self.camera))
-        if reading is None:
-            return x, P
-        limit = _nis_limit(settings.nis_quantile, len(reading.depth))
-        x, P, _, _ = surface.surface_update(self.model, x, P, self.R_c0, self.t_c0, self.surface,
-                                            reading, self.config.measurement, settings,
-                                            self.camera, self.config.ukf, limit)
-        return x, P
+        x, P = surface.skin_update(self.model, out[0], out[1], self.R_c0, self.t_c0, self.surface,
+                                   det.depth_image, self.config.measurement, self.config.surface,
+                                   self.camera, self.config.ukf)
+        return (x, P, *out[2:])
 
     def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
         """``out``, or a consistent re-association assuming a manoeuvre (see TrackerConfig)."""
         cfg, model = self.config, self.model
         n_assoc, nis, dof = out[3], out[4], out[5]
-        if n_assoc >= cfg.min_markers and not (dof and nis > _nis_limit(cfg.nis_quantile, dof)):
+        if n_assoc >= cfg.min_markers and not (dof and nis > chi2_quantile(cfg.nis_quantile, dof)):
             return out
         for accel, angular in cfg.manoeuvre_accel:
             P = track.P.copy()
@@ -386,7 +372,8 @@ class Tracker:
                 P[i, i] += (a * dt) ** 2
             retry = self._filter_frame(det, replace(track, P=P), dt)
             n, r_nis, r_dof = retry[3], retry[4], retry[5]
-            if n >= max(cfg.min_markers, n_assoc) and r_nis <= _nis_limit(cfg.nis_quantile, r_dof):
+            consistent = r_nis <= chi2_quantile(cfg.nis_quantile, r_dof)
+            if n >= max(cfg.min_markers, n_assoc) and consistent:
                 return retry
         return out
 
@@ -474,10 +461,6 @@ class Tracker:
 
 _ONES = np.ones(256)
 
-
-@lru_cache(maxsize=64)
-def _nis_limit(quantile: float, dof: int) -> float:
-    return float(chdtri(dof, 1.0 - quantile))  # chi2 quantile without importing scipy.stats
 
 
 def _all_finite(a: np.ndarray) -> bool:
