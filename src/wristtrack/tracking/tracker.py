@@ -462,7 +462,6 @@ class Tracker:
 _ONES = np.ones(256)
 
 
-
 def _all_finite(a: np.ndarray) -> bool:
     """np.isfinite(a).all() in one cheap call: a NaN or an inf anywhere makes the sum non-finite
     (finite entries could only overflow it beyond 1e308). The sum is a dot product with ones,
