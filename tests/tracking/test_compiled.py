@@ -46,31 +46,41 @@ XTION_LENS = (0.033, -0.108, 0.0, 0.0, 0.0)
 RATIONAL_LENS = (0.08, -0.2, 1e-3, -2e-3, 0.05, 0.02, -0.01, 0.01)
 
 
-def _initialised_tracker(seed: int, follow_slide: bool = False, lens=None) -> Tracker:
-    """A tracker initialised on a simulated recording (W0 and the layout fixed); with the skin
-    slide in its state where ``follow_slide``, a camera with distortion ``lens``."""
+# the states after the constant-rate model's: none, the skin slide, the slide and the depth
+# map's offset (the default)
+STATES = {"rigid": TrackerConfig(follow_slide=False),
+          "slide": TrackerConfig(follow_offset=False), "offset": TrackerConfig()}
+
+
+def _initialised_tracker(seed: int, states: str = "rigid", lens=None) -> Tracker:
+    """A tracker initialised on a simulated recording (W0 and the layout fixed); with the
+    ``states`` (STATES) in its state, a camera with distortion ``lens``."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario("deviation", rng=rng)
     camera = replace(camera, dist=lens)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
-    tracker = Tracker(camera, layout, TrackerConfig(follow_slide=follow_slide))
+    tracker = Tracker(camera, layout, STATES[states])
     assert tracker.step(frames[0].detections).has_estimate
     return tracker
 
 
-def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0), slide=False):
+def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0), states="rigid"):
     """A random state, covariance and interval, and blobs of markers near the prediction with
     misses, clutter and sometimes a blob crowding a marker (two markers then may want one).
-    ``turn``: a rotation vector (W0 axes) the random orientation is drawn about; ``slide``: the
-    state carries the skin slide (SlidingSkinModel's, a few mm) too."""
+    ``turn``: a rotation vector (W0 axes) the random orientation is drawn about; ``states``:
+    what the state carries after the constant-rate model's (STATES: the skin slide,
+    SlidingSkinModel's, a few mm; the depth offset, DepthOffsetModel's, a few px)."""
     scales = np.repeat([3e-4, 4e-6, 2.5e-3, 0.09], 3)  # rad^2, m^2, (m/s)^2, (rad/s)^2
     R = Rotation.from_rotvec(np.asarray(turn) + rng.normal(0, 0.3, 3)).as_matrix()
     x = ConstantRateModel.initial_state(
         R, rng.normal(0, 0.03, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1.0, 3)
     )
-    if slide:
+    if states != "rigid":
         scales = np.concatenate((scales, [2e-6, 3e-7]))  # m^2, distal and lateral
         x = np.concatenate((x, rng.normal(0, [1.5e-3, 5e-4])))
+    if states == "offset":
+        scales = np.concatenate((scales, [2.0, 2.0]))  # px^2
+        x = np.concatenate((x, rng.normal(0, 1.5, 2)))
     n = scales.size
     A = rng.standard_normal((n, n)) * np.sqrt(scales / n)[:, None] * rng.uniform(0.1, 3)
     P = A @ A.T + np.diag(scales) * 0.05
@@ -94,14 +104,16 @@ def _blob_var(obs, det: Detections) -> np.ndarray:
     return obs.blob_variance(det.suspect, det.count)
 
 
-@pytest.mark.parametrize(("follow_slide", "lens"),
-                         [(False, None), (True, None), (False, XTION_LENS), (True, RATIONAL_LENS)])
-def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, follow_slide, lens):
+@pytest.mark.parametrize(("states", "lens"), [
+    ("rigid", None), ("slide", None), ("offset", None), ("rigid", XTION_LENS),
+    ("offset", RATIONAL_LENS),
+])  # fmt: skip
+def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, states, lens):
     """Suspect blobs among them, taken at the model's pixel sigma above a learned one; with
-    and without the skin slide in the state (its spread learned to half the model's) and lens
-    distortion."""
-    tracker = _initialised_tracker(seed=7, follow_slide=follow_slide, lens=lens)
-    if follow_slide:
+    and without the skin slide (its spread learned to half the model's) and the depth offset
+    in the state, and lens distortion."""
+    tracker = _initialised_tracker(seed=7, states=states, lens=lens)
+    if states != "rigid":
         tracker.model.slide_scale = 0.5
     obs = tracker._observation(True)
     obs.set_pixel_sigma(0.1)
@@ -112,7 +124,7 @@ def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, follow
     rng = np.random.default_rng(8)
     outcomes = {compiled.OK: 0, compiled.DECLINED: 0}
     for _ in range(400):
-        det, x, P, dt = _random_frame(rng, obs, slide=follow_slide)
+        det, x, P, dt = _random_frame(rng, obs, states=states)
         code, x_c, P_c, labels, n_pairs, nis = step(x, P, dt, det.uv, det.depth,
                                                      _blob_var(obs, det), *args)
         outcomes[code] += 1
@@ -215,12 +227,11 @@ def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2) -> list
     return [tracker.step(f.detections) for f in frames]
 
 
-@pytest.mark.parametrize(("name", "follow_slide", "lens"), [
-    ("pronation", False, None), ("mix", False, None), ("mix", True, None),
-    ("mix", False, XTION_LENS), ("pronation", True, XTION_LENS),
+@pytest.mark.parametrize(("name", "states", "lens"), [
+    ("pronation", "rigid", None), ("mix", "rigid", None), ("mix", "slide", None),
+    ("mix", "offset", None), ("mix", "rigid", XTION_LENS), ("pronation", "offset", XTION_LENS),
 ])  # fmt: skip
-def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, follow_slide,
-                                                        lens):
+def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, states, lens):
     """Acceptance noise: clutter, misses, an occlusion, irregular frame intervals; with the
     skin slide in the state, its spread learned as the track goes; through a real lens."""
     taken = []
@@ -232,7 +243,7 @@ def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name,
         return out
 
     monkeypatch.setattr(Tracker, "_compiled_frame", counted)
-    config = TrackerConfig(follow_slide=follow_slide)
+    config = STATES[states]
     fast = _tracked(name, config, lens)
     assert sum(taken) > 0.9 * len(taken)  # the compiled step took nearly every frame
     monkeypatch.setattr(Tracker, "_compiled_frame", lambda self, det, track, dt: None)

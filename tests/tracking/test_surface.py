@@ -18,6 +18,7 @@ from wristtrack.hand import HandLayout
 from wristtrack.tracking import surface
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.offset_model import DepthOffsetModel, carry_offset
 from wristtrack.tracking.surface import SurfaceSettings
 
 CAMERA = Camera.default()
@@ -200,6 +201,44 @@ def test_an_update_beyond_its_nis_limit_is_not_applied():
                                             UKFParams(),
                                             nis_limit=1.0)
     assert nis > 1.0 and x1 is x and P1 is P
+
+
+def test_skin_read_through_a_misregistered_depth_map_tells_the_offset():
+    """Depth images rolled 2 px left and 1 px down against the colour image (as the renderer
+    misregisters them): the skin learned through them at a tilted W0, then read at two poses
+    turned further, about the hand's y axis and about its x axis. Updates of a state that
+    carries the offset (DepthOffsetModel), each at the true pose known closely, find the offset
+    (2, -1) within 0.2 px from no offset known (1.5 px prior), and leave the pose where it was.
+    One frame of flat skin tells only the offset along its slope (otherwise the offset is much
+    like a move along the skin's normal); the second, turned the other way, tells the rest. The
+    planes' shift learned at W0 is what makes the still start's own frame tell no offset."""
+    def rolled(depth: np.ndarray) -> np.ndarray:
+        return np.roll(depth, (1, -2), axis=(0, 1))  # its pixel (u, v) shows (u + 2, v - 1)
+
+    def turned(about_y: float, about_x: float) -> tuple[np.ndarray, np.ndarray]:
+        R = (Rotation.from_euler("X", np.pi) * Rotation.from_euler("yx", [about_y, about_x],
+                                                                  degrees=True)).as_matrix()
+        return R, np.array([-0.04, 0.0, 0.65])
+
+    R0, t0 = turned(15.0, 10.0)
+    skin = surface.learn_surface(CAMERA, HandLayout.default(), R0, t0,
+                                 [rolled(render_depth(R0, t0))], SETTINGS)
+    assert skin.offset_shift is not None and np.abs(skin.offset_shift).max() > 1e-4
+    model = DepthOffsetModel()
+    pose_prior = model.initial_covariance(np.diag([np.radians(0.02) ** 2] * 3 + [2e-5**2] * 3))
+    x1, P1 = None, None
+    for k, (R, t) in enumerate(((R0, t0), turned(45.0, 10.0), turned(10.0, 45.0))):
+        x = model.initial_state(R0.T @ R, R0.T @ (t - t0))
+        x, P = carry_offset(model, x, pose_prior, x1, P1)  # the offset found so far
+        reading = surface.read_patches(CAMERA, skin, R, t, rolled(render_depth(R, t)), SETTINGS)
+        x1, P1, _, _ = surface.surface_update(model, x, P, R0, t0, skin, reading,
+                                              MeasurementNoise(), SETTINGS, CAMERA, UKFParams(),
+                                              nis_limit=np.inf)
+        moved = Rotation.from_matrix(x1[:9].reshape(3, 3) @ x[:9].reshape(3, 3).T).magnitude()
+        assert np.degrees(moved) < 0.05 and np.linalg.norm(x1[9:12] - x[9:12]) < 1e-4
+        if k == 0:  # the still start's own frame: the skin as learned, no offset to tell
+            np.testing.assert_allclose(x1[20:], 0.0, atol=0.05)
+    np.testing.assert_allclose(x1[20:], [2.0, -1.0], atol=0.2)
 
 
 def test_the_tracker_learns_the_skin_and_tracks_closer_to_the_truth(every_effect):

@@ -16,8 +16,8 @@ def positive_int(text: str) -> int:
 
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
-    """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide and
-    --fixed-noise, read back by :func:`tracker_config`."""
+    """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide,
+    --[no-]follow-offset and --fixed-noise, read back by :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
@@ -30,6 +30,11 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
         help="carry the skin's slide over the knuckles in the filter state (the default); "
              "--no-follow-slide takes it as noise the markers share afresh each frame "
              "instead")
+    parser.add_argument(
+        "--follow-offset", action=argparse.BooleanOptionalAction, default=True,
+        help="carry the depth map's offset from the colour image (a calibration error of 1-2 "
+             "px) in the filter state, with the skin's slide (the default); --no-follow-offset "
+             "takes it as noise the depth readings share afresh each frame instead")
     parser.add_argument(
         "--fixed-noise", action="store_true",
         help="take the blobs' pixel noise and the skin slide as the model gives them instead of "
@@ -47,6 +52,6 @@ def tracker_config(args: argparse.Namespace):
     return TrackerConfig(association=args.association, use_depth=not args.no_depth,
                          surface=None if args.no_skin_depth else SurfaceSettings(),
                          adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise,
-                         follow_slide=args.follow_slide)
+                         follow_slide=args.follow_slide, follow_offset=args.follow_offset)
 
 

@@ -44,12 +44,15 @@ from wristtrack.tracking.kernel import (
     _GRAZING_COS,
     _HALF_GATE,
     _MERGE_REACH,
+    _N_OFFSET,
     _N_PAR,
+    _OFFSET_GRAZING_COS,
     _PIXEL_VAR,
     _REGISTRATION_PX,
     _SCALE,
     _SLIDE_TAU,
     _SLIDE_VAR,
+    _SQRT_DRIFT,
     _SQRT_QA,
     _SQRT_QW,
     _U_MAX,
@@ -58,7 +61,8 @@ from wristtrack.tracking.kernel import (
     OK,
 )
 from wristtrack.tracking.models import ConstantRateModel
-from wristtrack.tracking.observation import GRAZING_COS, STATE_SLIDE_AXES
+from wristtrack.tracking.observation import GRAZING_COS, OFFSET_GRAZING_COS, STATE_SLIDE_AXES
+from wristtrack.tracking.offset_model import DepthOffsetModel
 from wristtrack.tracking.slide_model import SlidingSkinModel
 
 if TYPE_CHECKING:
@@ -67,7 +71,7 @@ if TYPE_CHECKING:
 __all__ = ["DECLINED", "MODELS", "OK", "describe", "frame_constants", "load"]
 
 # The state models the step carries (exactly these: a subclass may change what they compute)
-MODELS = (ConstantRateModel, SlidingSkinModel)
+MODELS = (ConstantRateModel, SlidingSkinModel, DepthOffsetModel)
 
 
 def frame_constants(
@@ -100,6 +104,7 @@ def frame_constants(
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
+    par[_OFFSET_GRAZING_COS] = OFFSET_GRAZING_COS
     par[_MERGE_REACH] = merged.merge_reach(camera.fx) if merged_blobs else 0.0
     sliding = np.zeros(obs.n_markers)
     par[_DISTORTED] = float(camera.has_distortion)
@@ -111,6 +116,9 @@ def frame_constants(
         sliding[obs.sliding] = 1.0
         par[_SLIDE_TAU] = model.time_constant
         par[_SLIDE_VAR:_SLIDE_VAR + len(STATE_SLIDE_AXES)] = model.stationary_variance
+    par[_N_OFFSET], par[_SQRT_DRIFT] = 0.0, 0.0
+    if isinstance(model, DepthOffsetModel):  # (du, dv) after the slide
+        par[_N_OFFSET], par[_SQRT_DRIFT] = 2.0, math.sqrt(model.drift)
     # C-contiguous, writable float64: the types the step is compiled for (see _warm_up_arguments).
     # The tracker makes these again whenever the noise it learns changes (tracking/noise_scale.py)
     layout, slide = np.ascontiguousarray(obs.layout_T.T), np.ascontiguousarray(obs.slide)
@@ -214,9 +222,11 @@ def _warm_up_arguments() -> tuple:
     """Arguments of the types the tracker passes (C-contiguous writable float64 arrays, a float
     dt), so the compile done here is the one every frame uses. The values do not matter."""
     x = np.concatenate((np.eye(3).reshape(9), np.zeros(9)))
+    par = np.ones(_N_PAR)
+    par[_N_OFFSET] = 0.0  # the 12 states of x: no offset
     return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros(1), np.zeros((6, 3)),
             np.zeros((6, 3)), np.zeros(6), np.eye(3), np.ones(3), np.ones(37), np.ones(37),
-            np.ones(_N_PAR))  # fmt: skip
+            par)  # fmt: skip
 
 
 def _first_line(err: BaseException) -> str:

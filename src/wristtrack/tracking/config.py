@@ -8,6 +8,7 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.tracking.models import MODELS, ProcessNoise
 from wristtrack.tracking.observation import MeasurementNoise
+from wristtrack.tracking.offset_model import DepthOffsetModel
 from wristtrack.tracking.slide_model import SlidingSkinModel
 from wristtrack.tracking.surface import SurfaceSettings
 
@@ -29,6 +30,10 @@ class TrackerConfig:
     # state (tracking/slide_model.py); False: the slide as noise the markers share afresh each
     # frame, where a hand turned edge-on took part of it as a tilt (docs/BENCHMARKS.md, spread).
     follow_slide: bool = True
+    # With the slide in the state and depth in the updates: the depth map's offset from the
+    # colour image (a calibration error of 1-2 px) in the state too (tracking/offset_model.py);
+    # False: as noise the markers and the skin share afresh each frame.
+    follow_offset: bool = True
     process: ProcessNoise = ProcessNoise()
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
@@ -81,9 +86,15 @@ class TrackerConfig:
 
     def make_model(self):
         """The state model these settings name: the default model with the skin slide in its
-        state where ``follow_slide`` (and a slide is modelled), else MODELS[model]."""
+        state where ``follow_slide`` (and a slide is modelled), and with the depth offset too
+        where ``follow_offset`` (with depth, and a misregistration modelled), else
+        MODELS[model]."""
         if self.model == "default" and self.follow_slide and any(self.measurement.skin_slide):
-            return SlidingSkinModel(self.process, self.measurement.skin_slide)
+            noise = self.measurement
+            if self.follow_offset and self.use_depth and noise.registration_px > 0:
+                return DepthOffsetModel(self.process, noise.skin_slide,
+                                        prior_px=noise.registration_px)
+            return SlidingSkinModel(self.process, noise.skin_slide)
         return MODELS[self.model](self.process)
 
     @property

@@ -3,8 +3,9 @@
 The same filter as the generic path (tracking/generic_step.py, the reference, which reads like
 the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
 chi-square gate and Cholesky correction, for the constant-rate model, with or without the skin
-slide in the state (tracking/slide_model.py), with pixel + depth measurements (and the noise
-the markers share: skin slide, misregistration) on a camera with or without lens distortion.
+slide in the state (tracking/slide_model.py) and the depth map's offset after it
+(tracking/offset_model.py), with pixel + depth measurements (and the noise the markers share:
+skin slide, misregistration) on a camera with or without lens distortion.
 A frame's arrays are tiny (37 sigma points and a 12-D tangent, 45 and 14-D with the slide;
 6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost; compiled
 (tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
@@ -35,6 +36,7 @@ from wristtrack.geometry import (
     rotation_of_quat_into,
 )
 from wristtrack.tracking.kernel_algebra import cholesky_into, forward_solve_into, moments_into
+from wristtrack.tracking.merged import may_merge
 
 OK = 0  # the frame is done: the outputs are valid
 DECLINED = 1  # the generic path must take this frame (see the module's docstring)
@@ -44,8 +46,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
     _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _SLIDE_TAU, _DISTORTED,
-    _N_SCALARS,
-) = range(24)  # fmt: skip
+    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _N_SCALARS,
+) = range(27)  # fmt: skip
 _SLIDE_VAR = _N_SCALARS  # the slide's stationary variances (3)
 _DIST = _SLIDE_VAR + 3  # the lens distortion, Camera's (k1, k2, p1, p2, k3, k4, k5, k6)
 _N_PAR = _DIST + 8
@@ -59,14 +61,16 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
 
     x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance, or with the skin
     slide in the state (tracking/slide_model.py) x (18 + k,) [..., s] and P (12 + k, 12 + k), s
-    the slide along the hand's first k axes (observation.STATE_SLIDE_AXES); dt the step;
+    the slide along the hand's first k axes (observation.STATE_SLIDE_AXES), and the depth offset
+    (du, dv) after it where par[_N_OFFSET] is 2 (tracking/offset_model.py); dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
     each blob adds to its marker's in the update (generic_step._blob_variance); layout (J, 3) the
     markers in the hand frame; slide (J, 3) each marker's share in the common skin slide taken
     as noise (MarkerObservation.slide); sliding (J,) 1 for the markers the state's slide moves,
     else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (+ 4 k
     with the slide) sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
-    weights of all but the first are equal, so this is ukf.sigma_offsets' set); par the
+    weights of all but the first are equal, so this is ukf.sigma_offsets' set), S = 37 + 4 k + 8
+    with the offset too; par the
     constants (``compiled.frame_constants``).
     """
     n, M, m = P.shape[0], uv.shape[0], 3 * layout.shape[0]
@@ -88,25 +92,29 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
     mean = np.empty(m + n)
     C = np.empty((m + n, m + n))
     moments_into(W, wm, wc, mean, C)
-    q = np.empty(4)  # the predicted orientation, pvw its p, v, w, sl its slide (zeros: none)
-    pvw = np.empty(9)
+    q = np.empty(4)  # the predicted orientation, pvw its p, v, w, sl its slide (zeros: none),
+    pvw = np.empty(9)  # ro its depth offset (zeros: none)
     sl = np.zeros(3)
-    _predicted(x, dt, mean[m:], qs, qc, par, q, pvw, sl)
+    ro = np.zeros(2)
+    _predicted(x, dt, mean[m:], qs, qc, par, q, pvw, sl, ro)
     placed = np.empty(layout.shape)  # the predicted markers in the hand frame, slid
     for j in range(layout.shape[0]):
         for i in range(3):
             placed[j, i] = layout[j, i] + sliding[j] * sl[i]
+    Rc = np.empty((3, 3))  # the predicted hand's camera-frame pose
+    tc = np.empty(3)
+    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
     facing = np.empty(layout.shape[0])
-    if not _all_visible(q, pvw, placed, R_c0, t_c0, par, facing):
+    if not _all_visible(Rc, tc, placed, par, facing):
         return DECLINED, x_out, P_out, labels, 0, np.nan
 
     # associate
     _add_noise(C, mean, facing, par)  # C's measurement block: Pyy + each blob's noise
     blob_of = np.empty(layout.shape[0], dtype=np.int64)
     n_pairs = _associate(C, mean, uv, depth, par, labels, blob_of)
-    if n_pairs < 0 or _may_merge(q, pvw, placed, R_c0, t_c0, mean, blob_of, par):
+    if n_pairs < 0 or may_merge(Rc, tc, placed, mean, blob_of, par[_MERGE_REACH]):
         return DECLINED, x_out, P_out, labels, 0, np.nan
-    _add_shared_noise(C, q, pvw, placed, slide, R_c0, t_c0, par)  # and now Pyy + R
+    _add_shared_noise(C, Rc, tc, placed, slide, par)  # and now Pyy + R
 
     # update
     nis = np.nan
@@ -115,20 +123,27 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
             for j in range(n):
                 P_out[i, j] = 0.5 * (C[m + i, m + j] + C[m + j, m + i])
     else:
-        nis = _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, P_out)
+        nis = _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, ro, P_out,
+                       par)
         if nis != nis:
             return DECLINED, x_out, P_out, labels, 0, np.nan
-    _write_state(q, pvw, sl, x_out)
+    _write_state(q, pvw, sl, ro, par, x_out)
     return OK, x_out, P_out, labels, n_pairs, nis
 
 
 def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     """The augmented sigma points retracted, propagated, measured and lifted (the rows of W),
-    as ConstantRateModel.retract, propagate and lift (SlidingSkinModel's where n > 12) and
-    MarkerObservation.__call__; qs, qc get the state's orientation and the centre's turn."""
+    as ConstantRateModel.retract, propagate and lift (SlidingSkinModel's where n > 12,
+    DepthOffsetModel's with the offset) and MarkerObservation.__call__; qs, qc get the state's
+    orientation and the centre's turn."""
     J, n, S = layout.shape[0], L.shape[0], W.shape[0]
     m = 3 * J
-    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), then the slide's (n - 12)
+    n_off = int(par[_N_OFFSET])  # the depth offset's states, after the slide's (n_sl)
+    n_sl = n - 12 - n_off
+    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), the slide's, the offset's
+    s_drift = par[_SQRT_DRIFT] * math.sqrt(dt)  # the offset's drift over dt per unit noise
+    ro = np.zeros(2)  # a point's depth offset (px)
+    nc = np.empty(3)  # and the hand's normal, camera frame
     keep = math.exp(-dt / par[_SLIDE_TAU])  # the slide's share left after dt
     sq_s = np.empty(3)  # its innovation's sigmas
     for i in range(3):
@@ -169,9 +184,12 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             W[s, m + 3 + i] = off[3 + i] + dt * off[6 + i] + sa_p * off[n + i]
             W[s, m + 6 + i] = off[6 + i] + sa_v * off[n + i]
             W[s, m + 9 + i] = off[9 + i] + sw_w * off[n + 3 + i]
-        for i in range(n - 12):
+        for i in range(n_sl):
             W[s, m + 12 + i] = keep * off[12 + i] + sq_s[i] * off[n + 6 + i]
             sp[i] = keep * x[18 + i] + W[s, m + 12 + i]
+        for i in range(n_off):
+            W[s, m + 12 + n_sl + i] = off[12 + n_sl + i] + s_drift * off[n + 6 + n_sl + i]
+            ro[i] = x[18 + n_sl + i] + W[s, m + 12 + n_sl + i]
         # orientation t r q_state: retraction r = exp(dphi), turn t = exp(dt (w + dw) + the
         # midpoint share of the angular acceleration)
         quat_exp_into(off[0], off[1], off[2], r)
@@ -195,6 +213,8 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
         px = x[9] + dt * x[12] + W[s, m + 3]
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
+        for i in range(3):
+            nc[i] = R_c0[i, 0] * R[0, 2] + R_c0[i, 1] * R[1, 2] + R_c0[i, 2] * R[2, 2]
         for j in range(J):
             a = layout[j, 0] + sliding[j] * sp[0]
             b = layout[j, 1] + sliding[j] * sp[1]
@@ -207,7 +227,20 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             Z = R_c0[2, 0] * hx + R_c0[2, 1] * hy + R_c0[2, 2] * hz + t_c0[2]
             W[s, j], W[s, J + j] = _pixel(X, Y, Z, par)
             W[s, 2 * J + j] = Z
+            if n_off:  # its depth read off the blob, on the skin's slope
+                slope = _slope(X, Y, Z, nc[0], nc[1], nc[2], par[_OFFSET_GRAZING_COS])
+                W[s, 2 * J + j] += slope * (nc[0] * ro[0] / par[_FX] + nc[1] * ro[1] / par[_FY])
     qc[1:] = -qc[1:]
+
+
+def _slope(X, Y, Z, n0, n1, n2, grazing_cos):
+    """-z^2 / (n . p) of observation.registration_depth_jacobian at the camera-frame point
+    (X, Y, Z) on a surface of normal n (taken no steeper than at ``grazing_cos``): times n_x / fx
+    (n_y / fy) the depth's change per pixel of offset along u (v)."""
+    d = X * n0 + Y * n1 + Z * n2
+    steepest = grazing_cos * math.sqrt(X * X + Y * Y + Z * Z)
+    d = min(d, -steepest) if d < 0.0 else max(d, steepest)
+    return -Z * Z / d
 
 
 def _pixel(X, Y, Z, par):
@@ -220,7 +253,7 @@ def _pixel(X, Y, Z, par):
     return par[_FX] * x + par[_CX], par[_FY] * y + par[_CY]
 
 
-def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl):
+def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl, ro):
     """The predicted state: the mean lift retracted about the propagated centre."""
     g = np.empty(4)
     e = np.empty(4)
@@ -232,8 +265,12 @@ def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl):
         pvw[3 + i] = x[12 + i] + lift[6 + i]
         pvw[6 + i] = x[15 + i] + lift[9 + i]
     keep = math.exp(-dt / par[_SLIDE_TAU])
-    for i in range(lift.shape[0] - 12):
+    n_off = int(par[_N_OFFSET])
+    n_sl = lift.shape[0] - 12 - n_off
+    for i in range(n_sl):
         sl[i] = keep * x[18 + i] + lift[12 + i]
+    for i in range(n_off):
+        ro[i] = x[18 + n_sl + i] + lift[12 + n_sl + i]
 
 
 def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
@@ -246,12 +283,10 @@ def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
         tc[i] = R_c0[i, 0] * pvw[0] + R_c0[i, 1] * pvw[1] + R_c0[i, 2] * pvw[2] + t_c0[i]
 
 
-def _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
-    """generic_step.expected_markers for all markers: in front, facing the camera, on the
-    sensor; ``facing`` (J,) gets the cosines between the hand's normal and their lines of sight."""
-    Rc = np.empty((3, 3))
-    tc = np.empty(3)
-    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
+def _all_visible(Rc, tc, layout, par, facing):
+    """generic_step.expected_markers for all markers of the hand at (Rc, tc): in front, facing
+    the camera, on the sensor; ``facing`` (J,) gets the cosines between the hand's normal and
+    their lines of sight."""
     for j in range(layout.shape[0]):
         a, b, c = layout[j, 0], layout[j, 1], layout[j, 2]
         X = Rc[0, 0] * a + Rc[0, 1] * b + Rc[0, 2] * c + tc[0]
@@ -267,31 +302,6 @@ def _all_visible(q, pvw, layout, R_c0, t_c0, par, facing):
     return True
 
 
-def _may_merge(q, pvw, layout, R_c0, t_c0, mean, blob_of, par):
-    """Whether a marker left without a blob crowds one with a blob (predicted centres closer
-    than par[_MERGE_REACH] / their mean depth, merged.MERGE_DIAMETERS marker diameters): the
-    blob may show both, which generic_step decides (tracking/merged.py)."""
-    if par[_MERGE_REACH] <= 0.0:
-        return False
-    J = layout.shape[0]
-    Rc = np.empty((3, 3))
-    tc = np.empty(3)
-    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
-    z = np.empty(J)
-    for j in range(J):
-        z[j] = Rc[2, 0] * layout[j, 0] + Rc[2, 1] * layout[j, 1] + Rc[2, 2] * layout[j, 2] + tc[2]
-    for j in range(J):
-        if blob_of[j] >= 0:
-            continue
-        for i in range(J):
-            if blob_of[i] < 0:
-                continue
-            du, dv = mean[i] - mean[j], mean[J + i] - mean[J + j]
-            if math.sqrt(du * du + dv * dv) * 0.5 * (z[i] + z[j]) < par[_MERGE_REACH]:
-                return True
-    return False
-
-
 def _add_noise(C, mean, facing, par):
     """MarkerObservation.noise_variance added to the measurement block's diagonal, the markers
     seen at ``facing`` (cosines, _all_visible's)."""
@@ -305,14 +315,11 @@ def _add_noise(C, mean, facing, par):
         C[2 * J + j, 2 * J + j] += sd * sd
 
 
-def _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par):
+def _add_shared_noise(C, Rc, tc, layout, slide, par):
     """MarkerObservation.noise_covariance's shared part, G G^T with G its slide_jacobian and
-    registration_jacobian at the predicted state, added to the measurement block (rows
-    axis-major)."""
+    registration_jacobian at the predicted hand pose (Rc, tc), added to the measurement block
+    (rows axis-major)."""
     J = layout.shape[0]
-    Rc = np.empty((3, 3))
-    tc = np.empty(3)
-    _camera_pose(q, pvw, R_c0, t_c0, Rc, tc)
     G = np.zeros((3 * J, 5))
     s_reg = par[_REGISTRATION_PX]
     for j in range(J):
@@ -331,12 +338,9 @@ def _add_shared_noise(C, q, pvw, layout, slide, R_c0, t_c0, par):
             G[J + j, i] = 0.5 * (v_plus - v_minus)
             G[2 * J + j, i] = dz
         # the misregistration: the surface plane's depth one sigma off the blob in u and in v
-        d = X * Rc[0, 2] + Y * Rc[1, 2] + Z * Rc[2, 2]
-        steepest = par[_GRAZING_COS] * math.sqrt(X * X + Y * Y + Z * Z)
-        d = min(d, -steepest) if d < 0.0 else max(d, steepest)
-        slope = Z * Z / d
-        G[2 * J + j, 3] = -s_reg * Rc[0, 2] * slope / par[_FX]
-        G[2 * J + j, 4] = -s_reg * Rc[1, 2] * slope / par[_FY]
+        slope = _slope(X, Y, Z, Rc[0, 2], Rc[1, 2], Rc[2, 2], par[_GRAZING_COS])
+        G[2 * J + j, 3] = s_reg * Rc[0, 2] * slope / par[_FX]
+        G[2 * J + j, 4] = s_reg * Rc[1, 2] * slope / par[_FY]
     for r in range(3 * J):
         for c in range(r + 1):
             t = 0.0
@@ -388,9 +392,10 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
     return n_pairs
 
 
-def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, P_out):
+def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, ro, P_out, par):
     """ukf.update with the associated markers' rows (axis-major, in marker order), their
-    blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw, sl);
+    blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw, sl,
+    ro);
     P_out gets the covariance. Returns the NIS, NaN where the innovation covariance is not
     positive definite."""
     J, n = blob_of.shape[0], P_out.shape[0]
@@ -444,13 +449,17 @@ def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, P_out):
     q[:] = g
     for i in range(9):
         pvw[i] += G[3 + i, n]
-    for i in range(n - 12):
+    n_off = int(par[_N_OFFSET])
+    for i in range(n - 12 - n_off):
         sl[i] += G[12 + i, n]
+    for i in range(n_off):
+        ro[i] += G[n - n_off + i, n]
     return G[n, n]
 
 
-def _write_state(q, pvw, sl, out):
-    """out = [R(q / |q|) row-major, p, v, w] (and the slide s where out has room)."""
+def _write_state(q, pvw, sl, ro, par, out):
+    """out = [R(q / |q|) row-major, p, v, w] (and the slide s and the depth offset where out
+    has room for them)."""
     s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for i in range(4):
         q[i] *= s
@@ -461,14 +470,19 @@ def _write_state(q, pvw, sl, out):
             out[3 * i + j] = R[i, j]
     for i in range(9):
         out[9 + i] = pvw[i]
-    for i in range(out.shape[0] - 18):
+    n_off = int(par[_N_OFFSET])
+    n_sl = out.shape[0] - 18 - n_off
+    for i in range(n_sl):
         out[18 + i] = sl[i]
+    for i in range(n_off):
+        out[18 + n_sl + i] = ro[i]
 
 
 # the functions ``step`` calls, compiled under these names before it (compiled._jit)
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
     "depth_sigma", "oblique_sigma", "distorted", "cholesky_into", "forward_solve_into",
-    "_sigma_points", "_pixel", "moments_into", "_predicted", "_camera_pose", "_all_visible",
-    "_may_merge", "_add_noise", "_add_shared_noise", "_associate", "_correct", "_write_state",
+    "_sigma_points", "_slope", "_pixel", "moments_into", "_predicted", "_camera_pose",
+    "_all_visible", "may_merge", "_add_noise", "_add_shared_noise", "_associate", "_correct",
+    "_write_state",
 )  # fmt: skip

@@ -32,6 +32,8 @@ the group's mean than its own marker's centre, as far as the prediction can tell
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from wristtrack.hand import marker_image_diameter
@@ -136,3 +138,28 @@ def merge_variance(uv_hat: np.ndarray, z_hat: np.ndarray | None,
             var.append((MERGE_SPREAD_SHARE * np.ptp(z_hat[group])) ** 2)
         out[b] = np.array(var)
     return out
+
+
+def may_merge(Rc: np.ndarray, tc: np.ndarray, layout: np.ndarray, mean: np.ndarray,
+              blob_of: np.ndarray, reach: float) -> bool:
+    """The compiled step's test (tracking/kernel.py: plain loops, compiled with it) of whether a
+    marker left without a blob crowds one with a blob: predicted centres (``mean``'s u of each
+    marker, then v) closer than ``reach`` (merge_reach; 0: never) over their mean depth, the
+    hand at (Rc, tc) with markers ``layout`` (J, 3), ``blob_of`` (J,) each marker's blob or -1.
+    The blob may then show both, which generic_step decides with merged_groups."""
+    if reach <= 0.0:
+        return False
+    J = layout.shape[0]
+    z = np.empty(J)
+    for j in range(J):
+        z[j] = Rc[2, 0] * layout[j, 0] + Rc[2, 1] * layout[j, 1] + Rc[2, 2] * layout[j, 2] + tc[2]
+    for j in range(J):
+        if blob_of[j] >= 0:
+            continue
+        for i in range(J):
+            if blob_of[i] < 0:
+                continue
+            du, dv = mean[i] - mean[j], mean[J + i] - mean[J + j]
+            if math.sqrt(du * du + dv * dv) * 0.5 * (z[i] + z[j]) < reach:
+                return True
+    return False

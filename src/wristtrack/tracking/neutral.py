@@ -212,9 +212,12 @@ def reanchor(
     old: HandLayout,
     new: HandLayout,
     w0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    slide_dims: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The default model's state (x (18,), P (12,12); or with the skin slide, (20,), (14,14))
-    and W0 re-expressed for layout ``new``.
+    """The default model's state (x (18,), P (12,12); or with the skin slide, (20,), (14,14);
+    and the depth offset, (22,), (16,16)) and W0 re-expressed for layout ``new``. The slide
+    along the hand's first ``slide_dims`` axes turns with the hand frame (None: every state
+    after w is slide); the states after it (the depth offset: the camera's) do not change.
 
     The new hand frame is the old one moved by T (the rigid fit of ``new`` onto ``old``:
     p_old = T_R p_new + T_t). W0 moves with it, or becomes ``w0`` = (R_ch, t_ch, cov): a pose
@@ -233,14 +236,15 @@ def reanchor(
     pn = T_R.T @ (p + arm - T_t)
     vn = T_R.T @ (v + np.cross(w, arm))
     wn = T_R.T @ w
-    # with the skin slide, n = 12 + k: the slide along the hand's first k axes
+    # with the skin slide, k states: the slide along the hand's first k axes
     # (observation.STATE_SLIDE_AXES), which W0 does not turn; its share along the others is
     # noise, not state, and is dropped
     n = P.shape[0]
-    J = np.zeros((n, n))
-    for k in range(4):
-        J[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = T_R.T
-    J[12:, 12:] = T_R.T[: n - 12, : n - 12]
+    k = n - 12 if slide_dims is None else slide_dims
+    J = np.eye(n)
+    for i in range(4):
+        J[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = T_R.T
+    J[12 : 12 + k, 12 : 12 + k] = T_R.T[:k, :k]
     J[3:6, 0:3] = -T_R.T @ skew(arm)  # a turn of the hand moves the new origin
     Pn = J @ P @ J.T
     w0_cov = np.zeros((6, 6))
@@ -258,6 +262,5 @@ def reanchor(
         rot = np.kron(np.eye(2), R_w.T)  # camera-frame perturbations into W0 axes
         w0_cov = rot @ cov_w @ rot.T
         R_c0n, t_c0n = R_w, t_w
-    slide = [T_R.T[: n - 12, : n - 12] @ x[18:]]
-    xn = np.concatenate((Rn.reshape(9), pn, vn, wn, *slide))
+    xn = np.concatenate((Rn.reshape(9), pn, vn, wn, T_R.T[:k, :k] @ x[18 : 18 + k], x[18 + k :]))
     return xn, 0.5 * (Pn + Pn.T), R_c0n, t_c0n, w0_cov

@@ -43,6 +43,9 @@ SLIDING_MARKERS = tuple(j for j, name in enumerate(MARKER_NAMES) if name.startsw
 # it (see sim.realism): each marker's depth is read that far from its blob.
 REGISTRATION_PX = 1.5
 GRAZING_COS = 0.05  # the steepest view of the hand's surface the depth gradient is taken at
+# ... and the steepest its offset's depth change is predicted at (tracking/offset_model.py), as
+# steep as skin patches are read (surface.SurfaceSettings.grazing_cos)
+OFFSET_GRAZING_COS = 0.3
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,7 @@ class MarkerObservation:
         use_depth: bool,
         noise: MeasurementNoise = MeasurementNoise(),
         slide_of: Callable[[np.ndarray], np.ndarray] | None = None,
+        offset_of: Callable[[np.ndarray], np.ndarray] | None = None,
     ):
         self.camera = camera
         self.layout_T = np.asarray(layout_points, dtype=float).T.copy()  # (3, 6)
@@ -139,6 +143,11 @@ class MarkerObservation:
         # then the slide along the other axes
         self.slide_of = slide_of
         self.k = 3 if use_depth else 2
+        # states (S, D) -> (S, 2) the depth map's offset from the colour image (px), where the
+        # state carries it (tracking/offset_model.py): the misregistration is then no noise
+        self.offset_of = offset_of
+        if offset_of is not None:
+            noise = replace(noise, registration_px=0.0)
         self.noise = noise
         self.model_pixel_sigma = noise.pixel_sigma  # what a suspect blob is taken at
         self.motion_variance = 0.0  # px^2 every blob adds this frame: its blur (pixel_noise.py)
@@ -192,11 +201,15 @@ class MarkerObservation:
         return pts
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
-        pts = self.marker_points(X)
+        R_ch, t_ch = hand_in_camera(*self.pose(X), self.R_c0, self.t_c0)
+        pts = self._placed(X, R_ch, t_ch)
         out = np.empty((X.shape[0], self.n_markers, self.k))
         out[..., :2] = self.camera.project(pts)
         if self.k == 3:
             out[..., 2] = pts[..., 2]
+            if self.offset_of is not None:  # each depth read off its blob, on the skin's slope
+                out[..., 2] += depth_offset_change(pts, R_ch[:, None, :, 2], self.offset_of(X),
+                                                   self.camera.fx, self.camera.fy)
         return out.reshape(X.shape[0], -1)
 
     def noise_variance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
@@ -278,16 +291,32 @@ class MarkerObservation:
 
 
 def registration_depth_jacobian(points: np.ndarray, normals: np.ndarray, registration_px: float,
-                                fx: float, fy: float) -> np.ndarray:
+                                fx: float, fy: float, grazing_cos: float = GRAZING_COS,
+                                ) -> np.ndarray:
     """(K, 2) change of the depth read at camera-frame ``points`` (K, 3) on surfaces with
     ``normals`` ((K, 3) or (3,)) per ``registration_px`` of colour-depth offset along u and v:
-    dz/du = -n_x z^2 / (fx n.p) (likewise in v), the slope taken no steeper than GRAZING_COS."""
+    dz/du = -n_x z^2 / (fx n.p) (likewise in v), the slope taken no steeper than at
+    ``grazing_cos``."""
     normals = np.broadcast_to(normals, points.shape)
     d = np.einsum("kj,kj->k", points, normals)
-    steepest = GRAZING_COS * np.linalg.norm(points, axis=1)
+    steepest = grazing_cos * np.linalg.norm(points, axis=1)
     d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
     slope = registration_px * points[:, 2] ** 2 / d
     return np.column_stack((-normals[:, 0] * slope / fx, -normals[:, 1] * slope / fy))
+
+
+def depth_offset_change(points: np.ndarray, normals: np.ndarray, offset: np.ndarray, fx: float,
+                        fy: float) -> np.ndarray:
+    """(S, K) the change of the depth read at camera-frame ``points`` (S, K, 3) on surfaces with
+    ``normals`` ((S, K, 3) or (S, 1, 3)) where the depth map is ``offset`` (S, 2) px off the
+    colour image (tracking/offset_model.py): the surface's slope per pixel
+    (:func:`registration_depth_jacobian`, no steeper than at OFFSET_GRAZING_COS: beyond, the
+    hand's plane is no guide to the skin under a marker) times it."""
+    S, K = points.shape[:2]
+    normals = np.broadcast_to(normals, points.shape)
+    slope = registration_depth_jacobian(points.reshape(-1, 3), normals.reshape(-1, 3), 1.0, fx,
+                                        fy, OFFSET_GRAZING_COS).reshape(S, K, 2)
+    return np.einsum("skj,sj->sk", slope, offset)
 
 
 def markers_on_blobs(obs: MarkerObservation, x: np.ndarray, labels: np.ndarray, uv: np.ndarray,

@@ -76,14 +76,15 @@ class SlidingSkinModel(ConstantRateModel):
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
         out = np.empty_like(X)
         out[:, :18] = super().propagate(X[:, :18], noise[:, :6], dt)
-        out[:, 18:] = math.exp(-dt / self.time_constant) * X[:, 18:] + noise[:, 6:]
+        s = slice(18, 18 + _AXES)
+        out[:, s] = math.exp(-dt / self.time_constant) * X[:, s] + noise[:, 6:6 + _AXES]
         return out
 
     def process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((self.noise_dim, self.noise_dim))
         Q[:6, :6] = super().process_noise(dt)
         keep = math.exp(-dt / self.time_constant)
-        Q[6:, 6:] = np.diag(self.stationary_variance * (1.0 - keep * keep))
+        Q[6:6 + _AXES, 6:6 + _AXES] = np.diag(self.stationary_variance * (1.0 - keep * keep))
         return Q
 
     @staticmethod
@@ -91,7 +92,7 @@ class SlidingSkinModel(ConstantRateModel):
         """(S, 3) the slide (hand frame X, Y, Z) of states X (S, 18 + axes), zero along the
         axes the state does not carry."""
         out = np.zeros((X.shape[0], 3))
-        out[:, list(STATE_SLIDE_AXES)] = X[:, 18:]
+        out[:, list(STATE_SLIDE_AXES)] = X[:, 18:18 + _AXES]
         return out
 
     def initial_covariance(self, pose_cov: np.ndarray, v_sigma: float = 0.05,
@@ -100,5 +101,5 @@ class SlidingSkinModel(ConstantRateModel):
         INITIAL_SHARE of its stationary sigmas."""
         P = np.zeros((self.dim, self.dim))
         P[:12, :12] = super().initial_covariance(pose_cov, v_sigma, w_sigma)
-        P[12:, 12:] = np.diag(self.stationary_variance) * INITIAL_SHARE**2
+        P[self.slide, self.slide] = np.diag(self.stationary_variance) * INITIAL_SHARE**2
         return P

@@ -44,6 +44,7 @@ from wristtrack.filter import ukf
 from wristtrack.hand import HandLayout
 from wristtrack.tracking.observation import (
     MeasurementNoise,
+    depth_offset_change,
     hand_in_camera,
     registration_depth_jacobian,
 )
@@ -71,10 +72,17 @@ class SurfaceSettings:
 @dataclass(frozen=True)
 class DorsumSurface:
     """Local planes of the back of the hand: centres and unit normals (K, 3), hand frame; the
-    normals point along the hand frame's +Z, towards a camera that sees the markers."""
+    normals point along the hand frame's +Z, towards a camera that sees the markers.
+
+    ``offset_shift`` (K, 2): how far each plane was learned off the skin along its normal (m)
+    per pixel of the depth map's offset from the colour image (du, dv): the still start read the
+    skin that far beside where the colour image puts it (:func:`learned_offset_shift`). A state
+    that carries the offset (tracking/offset_model.py) moves the planes back by it. None: not
+    known (taken as zero)."""
 
     points: np.ndarray
     normals: np.ndarray
+    offset_shift: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -166,7 +174,19 @@ def learn_surface(camera: Camera, layout: HandLayout, R_ch: np.ndarray, t_ch: np
             normals.append(around[1])
     if not centres:
         return None
-    return DorsumSurface(np.array(centres), np.array(normals))
+    centres, normals = np.array(centres), np.array(normals)
+    return DorsumSurface(centres, normals,
+                         learned_offset_shift(camera, centres @ R_ch.T + t_ch, normals @ R_ch.T))
+
+
+def learned_offset_shift(camera: Camera, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(K, 2) the shift along their normals (m per px of offset along u and v) of planes
+    learned at camera-frame ``points`` with ``normals`` (K, 3) from a depth map offset from the
+    colour image: each pixel read the depth the slope g (registration_depth_jacobian) times the
+    offset further along its ray r, which moves the plane by (n . r) g along n."""
+    rays = points / points[:, 2:]
+    slope = registration_depth_jacobian(points, normals, 1.0, camera.fx, camera.fy)
+    return np.einsum("kj,kj->k", normals, rays)[:, None] * slope
 
 
 def _plane_fit(q: np.ndarray, min_points: int) -> tuple[float, np.ndarray] | None:
@@ -290,17 +310,30 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
     (x, P, NIS, dof). ``noise`` is the markers' MeasurementNoise (the sensor's depth sigma and
     the misregistration); an update whose NIS is beyond ``nis_limit`` is not applied."""
     pts, nrm = surface.points[reading.patches], surface.normals[reading.patches]
+    offset_of = getattr(model, "depth_offset", None)  # the misregistration in the state
+    shift = None if surface.offset_shift is None else surface.offset_shift[reading.patches]
 
     def h(X: np.ndarray) -> np.ndarray:
         R_ch, t_ch = hand_in_camera(*model.pose(X), R_c0, t_c0)
-        Pw = np.einsum("sij,kj->ski", R_ch, pts) + t_ch[:, None]
         Nw = np.einsum("sij,kj->ski", R_ch, nrm)
-        return plane_depths(Pw, Nw, reading.rays[None])
+        if offset_of is None:
+            Pw = np.einsum("sij,kj->ski", R_ch, pts) + t_ch[:, None]
+            return plane_depths(Pw, Nw, reading.rays[None])
+        o = offset_of(X)
+        # the planes moved back onto the skin (learned off it by the offset), then each centre
+        # ray's depth read off it by the offset: the plane's depth moved along its slope
+        skin = pts[None] - nrm[None] * (o @ shift.T)[..., None] if shift is not None else pts
+        Pw = np.einsum("sij,s...j->s...i", R_ch, np.broadcast_to(skin, (len(X), *pts.shape)))
+        z = plane_depths(Pw + t_ch[:, None], Nw, reading.rays[None])
+        return z + depth_offset_change(z[..., None] * reading.rays[None], Nw, o, camera.fx,
+                                       camera.fy)
 
     pred = ukf.predict_measurement(model, x, P, h, params)
-    G = registration_depth_jacobian(reading.points, reading.normals, noise.registration_px,
-                                    camera.fx, camera.fy)
-    R = np.diag(noise.depth_sigma(reading.depth) ** 2 + settings.shape_sigma ** 2) + G @ G.T
+    R = np.diag(noise.depth_sigma(reading.depth) ** 2 + settings.shape_sigma ** 2)
+    if offset_of is None:  # the misregistration as noise the patches share
+        G = registration_depth_jacobian(reading.points, reading.normals, noise.registration_px,
+                                        camera.fx, camera.fy)
+        R += G @ G.T
     res = ukf.update(model, x, P, pred, reading.depth, R)
     if not res.nis <= nis_limit:
         return x, P, res.nis, res.dof

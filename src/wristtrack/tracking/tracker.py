@@ -42,6 +42,7 @@ from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
+from wristtrack.tracking.offset_model import carry_offset
 from wristtrack.tracking.restart import moving_start
 from wristtrack.tracking.results import FrameResult, Status
 
@@ -107,6 +108,7 @@ class Tracker:
         self.learned_noise = noise_scale.LearnedNoise()
         # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
         self._flip: hypotheses.PlanarHypotheses | None = None
+        self._camera_state: tuple = (None, None)  # the last track's (x, P), for its depth offset
         self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
 
     def __getstate__(self) -> dict:
@@ -139,6 +141,8 @@ class Tracker:
         return self._track_frame(det, track)
 
     def _lose(self) -> None:
+        if self._track is not None:
+            self._camera_state = (self._track.x, self._track.P)
         self._track = None
         self.status = Status.LOST
 
@@ -226,6 +230,9 @@ class Tracker:
             old = self._track  # restarted within a track: at the velocity since its last frame
             if old is not None and det.timestamp - old.timestamp <= LONG_GAP_S:
                 x = moving_start(self.model, x, old.x, det.timestamp - old.timestamp)
+            # the depth offset is the camera's: kept from the track before, even a lost one
+            before = (old.x, old.P) if old else getattr(self, "_camera_state", (None, None))
+            x, P = carry_offset(self.model, x, P, *before)
         else:  # the first fixes W0; its uncertainty is carried apart (_result)
             # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
             rot = np.kron(np.eye(2), self.R_c0.T)
@@ -245,9 +252,11 @@ class Tracker:
         new = (still.layout() if self._layout_measured else None) or self.layout
         # the start of the W0 fit: W0 moved into the new layout's hand frame
         T_R, T_t = fit_pose(self.layout, new.points)
+        slide = getattr(self.model, "slide", None)
         w0 = still.w0(new, self.R_c0 @ T_R, self.t_c0 + self.R_c0 @ T_t, self.config.measurement)
         track.x, track.P, self.R_c0, self.t_c0, self.w0_cov = reanchor(
-            track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0)
+            track.x, track.P, self.R_c0, self.t_c0, self.layout, new, w0,
+            0 if slide is None else slide.stop - slide.start)
         track.R_prev = track.x[:9].reshape(3, 3)
         self.layout = new
         if self.config.skin_depth and len(still.depth_images) >= MIN_FRAMES:
@@ -261,7 +270,8 @@ class Tracker:
         if use_depth not in self._obs:
             self._obs[use_depth] = MarkerObservation(
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
-                use_depth, self.config.measurement, getattr(self.model, "skin_slide", None))
+                use_depth, self.config.measurement, getattr(self.model, "skin_slide", None),
+                getattr(self.model, "depth_offset", None))
             self.learned_noise.apply(self._obs[use_depth])
         return self._obs[use_depth]
 
