@@ -46,10 +46,10 @@ XTION_LENS = (0.033, -0.108, 0.0, 0.0, 0.0)
 RATIONAL_LENS = (0.08, -0.2, 1e-3, -2e-3, 0.05, 0.02, -0.01, 0.01)
 
 
-# the states after the constant-rate model's: none, the skin slide, the slide and the depth
-# map's offset (the default)
-STATES = {"rigid": TrackerConfig(follow_slide=False),
-          "slide": TrackerConfig(follow_offset=False), "offset": TrackerConfig()}
+# the states after the constant-rate model's: none, the skin slide (the default), the slide and
+# the depth map's offset
+STATES = {"rigid": TrackerConfig(follow_slide=False), "slide": TrackerConfig(),
+          "offset": TrackerConfig(follow_offset=True)}
 
 
 def _initialised_tracker(seed: int, states: str = "rigid", lens=None) -> Tracker:

@@ -129,7 +129,7 @@ def test_the_tracker_finds_the_rendered_misregistration_and_keeps_it(misregister
     camera, hand, detections, truth, offset = misregistered
     assert 1 <= abs(offset[0]) <= 2 and abs(offset[1]) <= 1
     errors = []
-    for config in (TrackerConfig(follow_offset=False), TrackerConfig()):
+    for config in (TrackerConfig(), TrackerConfig(follow_offset=True)):
         tracker = Tracker(camera, hand, config)
         results = [tracker.step(d) for d in detections[:120]]
         errors.append(score(results, truth)["pos"])  # (the truth of the frames tracked)

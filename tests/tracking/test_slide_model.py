@@ -149,9 +149,9 @@ def test_a_rigid_hand_learns_that_its_skin_does_not_slide():
 def test_a_fresh_fit_starts_the_slide_narrow_and_the_option_asks_for_the_model():
     """initial_covariance: the pose's block as the constant-rate model's, the slide at
     INITIAL_SHARE of its stationary sigmas; the sliding model is the default (--follow-slide),
-    with the depth offset after the slide where depth is used (--follow-offset), without it
-    with --no-follow-offset or --no-depth; --no-follow-slide gives the constant-rate model
-    alone, and without a modelled slide (or with the paper's model) there is none to follow."""
+    with the depth offset after the slide where asked for and depth is used (--follow-offset,
+    not with --no-depth); --no-follow-slide gives the constant-rate model alone, and without a
+    modelled slide (or with the paper's model) there is none to follow."""
     model = SlidingSkinModel(slide_sigma=(0.002, 0.001, 0.001))
     model.slide_scale = 0.25
     pose = np.diag([1e-4] * 3 + [1e-6] * 3)
@@ -161,10 +161,11 @@ def test_a_fresh_fit_starts_the_slide_narrow_and_the_option_asks_for_the_model()
                                0.25 * INITIAL_SHARE**2 * np.array([0.002, 0.001]) ** 2)
     parser = argparse.ArgumentParser()
     add_tracker_options(parser)
-    for args in ([], ["--follow-slide"], ["--follow-offset"]):
-        assert type(tracker_config(parser.parse_args(args)).make_model()) is DepthOffsetModel
-    for args in (["--no-follow-offset"], ["--no-depth"]):
+    for args in ([], ["--follow-slide"], ["--no-follow-offset"],
+                 ["--follow-offset", "--no-depth"]):
         assert type(tracker_config(parser.parse_args(args)).make_model()) is SlidingSkinModel
+    assert type(tracker_config(parser.parse_args(["--follow-offset"])).make_model()) is \
+        DepthOffsetModel
     assert type(tracker_config(parser.parse_args(["--no-follow-slide"])).make_model()) is \
         ConstantRateModel
     rigid = TrackerConfig(follow_slide=True, measurement=MeasurementNoise(skin_slide=(0, 0, 0)))

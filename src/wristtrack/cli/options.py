@@ -31,10 +31,12 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
              "--no-follow-slide takes it as noise the markers share afresh each frame "
              "instead")
     parser.add_argument(
-        "--follow-offset", action=argparse.BooleanOptionalAction, default=True,
+        "--follow-offset", action=argparse.BooleanOptionalAction, default=False,
         help="carry the depth map's offset from the colour image (a calibration error of 1-2 "
-             "px) in the filter state, with the skin's slide (the default); --no-follow-offset "
-             "takes it as noise the depth readings share afresh each frame instead")
+             "px) in the filter state, with the skin's slide; better positions from a "
+             "structured-light camera, but see the README before using it for angles (the "
+             "default, --no-follow-offset, takes it as noise the depths share afresh each "
+             "frame)")
     parser.add_argument(
         "--fixed-noise", action="store_true",
         help="take the blobs' pixel noise and the skin slide as the model gives them instead of "

@@ -1,4 +1,5 @@
-"""The default model with the depth map's offset from the colour image in the state.
+"""The sliding-skin model with the depth map's offset from the colour image in the state too
+(``track --follow-offset``; off by default, see below).
 
 A depth map registered to the colour image by the camera's factory calibration is 1-2 px off
 it (sim/realism.py; observation.REGISTRATION_PX): every depth is read that far from where the
@@ -16,16 +17,22 @@ nearly static random walk from a prior of REGISTRATION_PX per axis. The observat
 slope x offset to each sigma point's depths (``observation.depth_offset_change``; the slope no
 steeper than skin patches are read at), and the shared registration noise is dropped
 (``observation.MarkerObservation``). The skin's planes, learned through the same offset over the
-still start, are moved back onto the skin by it (``surface.DorsumSurface.offset_shift``): left
-where they were learned, the still start's own pose read as no offset and the estimate came out
-at about half the rendered one. The estimate outlives the track: a track found again after a
-loss starts from it (``carry_offset``).
+still start, are moved back onto the skin by it (``surface.DorsumSurface.offset_shift``). Left
+where they were learned, they read the still start's own pose as no offset: patches alone found
+about half the rendered offset, and arched hands with the markers too 1.35 and 0.40 px of the
+rendered 2 (2.18 and 2.13 with the planes moved). The estimate outlives the track: a track found
+again after a loss starts from it (``carry_offset``).
 
-Measured on rendered recordings (structured-light depth 1-2 px off the colour image):
-structured light alone, the offset is found within 0.05-0.21 px (3 seeds; orientation
-0.248 -> 0.219 deg, position 0.47 -> 0.23 mm; clean recordings unchanged). With every effect at once the
-estimate is 0.5-2 px off (the skin's shape changing with the fingers and the arch of the knuckles
-move the depth the same way), and the figures move both ways by seed and hand (docs/BENCHMARKS.md).
+Measured on rendered recordings (structured-light depth 1-2 px off the colour image). Structured
+light alone (3 seeds): the offset found within 0.05-0.21 px, orientation 0.248 -> 0.219 deg,
+position 0.47 -> 0.23 mm; clean recordings unchanged. Every effect at once (benchmarks' spread,
+10 seeds a condition, run with the offset on at 350293a): position better in four of six
+conditions (preset real 0.98 -> 0.79 mm, without hand.json 1.05 -> 0.90), but the estimate is
+0.5-2 px off: it takes up the depth errors of the hand itself (the skin's shape changing as the
+fingers flex, the knuckles' arch under the markers), which move the depths as the offset does.
+The range of motion came out no better (right hand making the left hand's movement 1.54 ->
+1.56 deg, smoothed 0.86 -> 0.89) and worse on the left hands (0.95 -> 1.02, smoothed 0.56 ->
+0.62), so the default leaves the offset as noise (TrackerConfig.follow_offset).
 """
 
 from __future__ import annotations
