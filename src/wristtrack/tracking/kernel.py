@@ -6,10 +6,10 @@ chi-square gate and Cholesky correction, for the constant-rate model, with or wi
 slide in the state (tracking/slide_model.py) and the depth map's offset after it
 (tracking/offset_model.py), with pixel + depth measurements (and the noise the markers share:
 skin slide, misregistration) on a camera with or without lens distortion.
-A frame's arrays are tiny (37 sigma points and a 12-D tangent, 45 and 14-D with the slide;
-6 markers x 3 measurements), so in NumPy the per-call overhead is nearly all the cost; compiled
-(tracking/compiled.py), the frame is one call. Equal to the generic step to rounding
-(tests/tracking/test_compiled.py).
+A frame's arrays are tiny (37 sigma points and a 12-D tangent, 45 and 14-D with the slide, 53
+and 16-D with the offset too; 6 markers x 3 measurements), so in NumPy the per-call overhead is
+nearly all the cost; compiled (tracking/compiled.py), the frame is one call. Equal to the
+generic step to rounding (tests/tracking/test_compiled.py).
 
 Only the common frame is handled here. ``step`` returns DECLINED, having changed nothing, where
 the generic path has a branch this does not copy: a covariance that is not positive definite
@@ -68,10 +68,9 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
     markers in the hand frame; slide (J, 3) each marker's share in the common skin slide taken
     as noise (MarkerObservation.slide); sliding (J,) 1 for the markers the state's slide moves,
     else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (+ 4 k
-    with the slide) sigma points ordered 0, +columns of L, -columns of L, +noise, -noise (the
-    weights of all but the first are equal, so this is ukf.sigma_offsets' set), S = 37 + 4 k + 8
-    with the offset too; par the
-    constants (``compiled.frame_constants``).
+    with the slide, + 8 with the offset) sigma points ordered 0, +columns of L, -columns of L,
+    +noise, -noise (the weights of all but the first are equal, so this is ukf.sigma_offsets'
+    set); par the constants (``compiled.frame_constants``).
     """
     n, M, m = P.shape[0], uv.shape[0], 3 * layout.shape[0]
     labels = np.empty(M, dtype=np.int64)
@@ -213,7 +212,7 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
         px = x[9] + dt * x[12] + W[s, m + 3]
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
-        for i in range(3):
+        for i in range(3 if n_off else 0):
             nc[i] = R_c0[i, 0] * R[0, 2] + R_c0[i, 1] * R[1, 2] + R_c0[i, 2] * R[2, 2]
         for j in range(J):
             a = layout[j, 0] + sliding[j] * sp[0]
