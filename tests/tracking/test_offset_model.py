@@ -7,8 +7,7 @@ depth image rolled by it, so its pixel (u, v) shows the surface at (u - dx, v - 
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
+import json
 
 import numpy as np
 import pytest
@@ -18,7 +17,12 @@ from wristtrack.camera import Camera
 from wristtrack.hand import HandLayout, fit_pose
 from wristtrack.tracking.neutral import reanchor
 from wristtrack.tracking.observation import REGISTRATION_PX, depth_offset_change
-from wristtrack.tracking.offset_model import OFFSET_DRIFT, DepthOffsetModel, carry_offset
+from wristtrack.tracking.offset_model import (
+    OFFSET_DRIFT,
+    DepthOffsetModel,
+    carry_offset,
+    registration_estimate,
+)
 from wristtrack.tracking.slide_model import SlidingSkinModel
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
@@ -82,6 +86,21 @@ def test_a_fresh_fit_takes_the_offset_of_the_track_before():
     assert carry_offset(SlidingSkinModel(), x[:20], P[:14, :14], before_x, before_P)[0] is not None
 
 
+def test_the_estimate_reported_is_the_states_offset_and_its_sigma():
+    """summary.json's depth_registration: the state's (du, dv) and the roots of their variances;
+    nothing for a model without the offset or before any track."""
+    model = DepthOffsetModel()
+    x = model.initial_state(np.eye(3), np.zeros(3), o=[1.25, -0.5])
+    P = np.eye(16) * 1e-4
+    P[14:, 14:] = [[0.09, 0.02], [0.02, 0.16]]
+    got = registration_estimate(model, x, P)
+    assert (got["du_px"], got["dv_px"]) == (1.25, -0.5)
+    np.testing.assert_allclose(got["sd_px"], [0.3, 0.4])
+    assert got["prior_sd_px"] == REGISTRATION_PX
+    assert registration_estimate(model, None, None) is None
+    assert registration_estimate(SlidingSkinModel(), x[:20], P[:14, :14]) is None
+
+
 def test_a_new_hand_frame_turns_the_slide_and_leaves_the_offset():
     """The offset is the camera's: a change of W0 and layout (the end of the still start)
     keeps it and its variance; the slide turns with the hand frame as it did."""
@@ -103,20 +122,19 @@ def test_a_new_hand_frame_turns_the_slide_and_leaves_the_offset():
 
 
 @pytest.fixture(scope="module")
-def misregistered():
+def misregistered(tmp_path_factory):
     """A rendered recording with structured-light depth alone (benchmarks.robustness'
-    "structured_light", seed 0, its first 150 frames), its detections, truth and the offset it
-    was rendered with (the filter's convention: minus the sensor's roll)."""
+    "structured_light", seed 0, its first 150 frames), its detections, truth, the offset it
+    was rendered with (the filter's convention: minus the sensor's roll) and its folder."""
     from benchmarks.accuracy import recorded_detections
     from benchmarks.robustness import BASE_SCENARIO, render_condition
     from wristtrack.sim.renderer import Renderer
     from wristtrack.sim.scenes import make_scene
 
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = render_condition(Path(tmp), "structured_light", 0, 150)
-        camera, hand, detections, truth = recorded_detections(folder)
+    folder = render_condition(tmp_path_factory.mktemp("sl"), "structured_light", 0, 150)
+    camera, hand, detections, truth = recorded_detections(folder)
     shift = Renderer(make_scene(BASE_SCENARIO, 0, effects=["structured_light"]), 0).depth.sl_shift
-    return camera, hand, detections, truth, -np.asarray(shift, dtype=float)
+    return camera, hand, detections, truth, -np.asarray(shift, dtype=float), folder
 
 
 def test_the_tracker_finds_the_rendered_misregistration_and_keeps_it(misregistered):
@@ -126,7 +144,7 @@ def test_the_tracker_finds_the_rendered_misregistration_and_keeps_it(misregister
     starts from the offset found."""
     from benchmarks.accuracy import score
 
-    camera, hand, detections, truth, offset = misregistered
+    camera, hand, detections, truth, offset, _ = misregistered
     assert 1 <= abs(offset[0]) <= 2 and abs(offset[1]) <= 1
     errors = []
     for config in (TrackerConfig(), TrackerConfig(follow_offset=True)):
@@ -144,3 +162,25 @@ def test_the_tracker_finds_the_rendered_misregistration_and_keeps_it(misregister
     assert again.has_estimate and tracker._initialisations == 2
     np.testing.assert_array_equal(tracker._track.x[20:], found)
     np.testing.assert_array_equal(tracker._track.P[14:, 14:], P_before)
+
+
+def test_track_reports_the_offset_found_in_its_summary_and_report(misregistered, tmp_path):
+    """``track --follow-offset``: summary.json's depth_registration is the rendered offset to
+    0.35 px, and the report says it; without the option there is no estimate to report."""
+    from wristtrack.cli import main
+
+    offset, folder = misregistered[4], misregistered[5]
+    out = tmp_path / "run"
+    assert main(["track", str(folder), "--out", str(out), "--no-progress",
+                 "--follow-offset"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    found = summary["depth_registration"]
+    np.testing.assert_allclose([found["du_px"], found["dv_px"]], offset, atol=0.35)
+    assert max(found["sd_px"]) < 0.4 and found["prior_sd_px"] == REGISTRATION_PX
+    text = (out / "report.html").read_text(encoding="utf-8")
+    assert (f"the depth map sits ({found['du_px']:.2f}, {found['dv_px']:.2f}) px (sd "
+            f"{found['sd_px'][0]:.2f}, {found['sd_px'][1]:.2f}) from the colour image") in text
+    assert main(["track", str(folder), "--out", str(tmp_path / "plain"), "--no-progress",
+                 "--no-report"]) == 0
+    plain = json.loads((tmp_path / "plain" / "summary.json").read_text())
+    assert plain["depth_registration"] is None

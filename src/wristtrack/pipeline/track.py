@@ -334,6 +334,7 @@ def _finish(
         warnings=list(getattr(tracker, "warnings", [])),
         # the markers' noise as the recording showed it (tracking/noise_scale.py)
         measurement_noise=tracker.learned_noise.describe(config.measurement),
+        depth_registration=tracker.depth_registration,  # --follow-offset's estimate, else None
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),
@@ -376,10 +377,8 @@ def _note_bad(bar, bad_frames: list[dict[str, Any]], index: int, error: str) -> 
     if len(bad_frames) <= MAX_BAD_FRAME_LINES:
         bar.write(f"wristtrack: frame {index} skipped: {error}", file=sys.stderr)
     if len(bad_frames) == MAX_BAD_FRAME_LINES + 1:
-        bar.write(
-            "wristtrack: more frames skipped; summary.json lists every one (skipped_frames)",
-            file=sys.stderr,
-        )
+        bar.write("wristtrack: more frames skipped; summary.json lists every one "
+                  "(skipped_frames)", file=sys.stderr)
 
 
 def no_initialisation_message(recording: Recording, n_frames: int, tracker: Tracker) -> str:

@@ -173,6 +173,9 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     noise = summary.get("measurement_noise")
     if noise:  # what the tracker learned of this camera's blobs and this hand's skin
         rows.append(("Noise learned", _learned_noise(noise)))
+    offset = summary.get("depth_registration")
+    if offset:  # --follow-offset: the depth map's offset from the colour image, as estimated
+        rows.append(("Depth registration", _registration(offset)))
     conventions = summary.get("conventions") or {}
     labels = {"angles": "Angle sequence and signs", "side": "Side", "neutral": "Neutral posture",
               "hand_frame": "Hand frame", "units": "Units", "velocities": "Velocities"}
@@ -192,6 +195,15 @@ def _learned_noise(noise: dict[str, Any]) -> str:
             f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){scatter}{correlated}; skin "
             f"slide over the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the "
             "model's")
+
+
+def _registration(offset: dict[str, Any]) -> str:
+    """summary.json's depth_registration in words (tracking/offset_model.py)."""
+    su, sv = offset["sd_px"]
+    return (f"the depth map sits ({_fmt(offset['du_px'], 2)}, {_fmt(offset['dv_px'], 2)}) px "
+            f"(sd {_fmt(su, 2)}, {_fmt(sv, 2)}) from the colour image: {offset['convention']}; "
+            "recordings that agree on a pixel or more say the camera's depth-to-colour "
+            "registration wants redoing")
 
 
 def _notes(summary: dict[str, Any], columns: dict[str, np.ndarray]) -> str:

@@ -21,7 +21,9 @@ still start, are moved back onto the skin by it (``surface.DorsumSurface.offset_
 where they were learned, they read the still start's own pose as no offset: patches alone found
 about half the rendered offset, and arched hands with the markers too 1.35 and 0.40 px of the
 rendered 2 (2.18 and 2.13 with the planes moved). The estimate outlives the track: a track found
-again after a loss starts from it (``carry_offset``).
+again after a loss starts from it (``carry_offset``). summary.json reports the last estimate
+(``registration_estimate``): a camera whose depth sits pixels off its colour image wants its
+registration redone.
 
 Measured on rendered recordings (structured-light depth 1-2 px off the colour image). Structured
 light alone (3 seeds): the offset found within 0.05-0.21 px, orientation 0.248 -> 0.219 deg,
@@ -107,3 +109,17 @@ def carry_offset(model, x: np.ndarray, P: np.ndarray, previous_x: np.ndarray | N
     P[:, model.offset] = 0.0
     P[model.offset, model.offset] = previous_P[model.offset, model.offset]
     return x, P
+
+
+def registration_estimate(model, x: np.ndarray | None,
+                          P: np.ndarray | None) -> dict[str, object] | None:
+    """The depth map's offset from the colour image in state ``x`` (covariance ``P``) as
+    summary.json reports it: ``du_px``, ``dv_px``, their standard deviations ``sd_px`` and the
+    prior's (``prior_sd_px``). None where the model does not carry the offset or no track ran."""
+    if x is None or P is None or not isinstance(model, DepthOffsetModel):
+        return None
+    du, dv = (float(c) for c in x[model._state])
+    sd = np.sqrt(np.maximum(np.diag(P)[model.offset], 0.0))
+    return {"du_px": du, "dv_px": dv, "sd_px": [float(s) for s in sd],
+            "prior_sd_px": float(model.prior_px),
+            "convention": "depth pixel (u, v) shows what colour pixel (u + du, v + dv) shows"}

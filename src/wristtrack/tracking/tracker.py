@@ -42,7 +42,7 @@ from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
-from wristtrack.tracking.offset_model import carry_offset
+from wristtrack.tracking.offset_model import carry_offset, registration_estimate
 from wristtrack.tracking.restart import moving_start
 from wristtrack.tracking.results import FrameResult, Status
 
@@ -145,6 +145,14 @@ class Tracker:
             self._camera_state = (self._track.x, self._track.P)
         self._track = None
         self.status = Status.LOST
+
+    @property
+    def depth_registration(self) -> dict | None:
+        """The depth map's offset from the colour image as the running track, else the last one,
+        estimated it (the camera's: offset_model.registration_estimate); None where not carried."""
+        last = getattr(self, "_camera_state", (None, None))  # (checkpoints from before it)
+        state = (self._track.x, self._track.P) if self._track else last
+        return registration_estimate(self.model, *state)
 
     def _empty(self, det: Detections, status: Status) -> FrameResult:
         return FrameResult.empty(self._frame, det.timestamp, status, det.count)
