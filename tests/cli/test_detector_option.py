@@ -44,9 +44,11 @@ def test_track_with_the_paper_detector_is_a_valid_run(rec, paper_run, check_run)
     assert summary["settings"]["model"] == "default"  # the detector alone changes
     from wristtrack.analysis.evaluate import evaluate
 
-    # the slow clean reach is tracked on the paper's blobs too (0.7 deg, 3.7 mm measured)
+    # the slow clean reach is tracked on the paper's blobs too (0.35 deg, 1.5 mm measured);
+    # the second of two frames whose blobs it missed has no pose (its prediction, 21 mm off,
+    # is too uncertain to report: TrackerConfig.coast_rot_sigma_deg)
     r = evaluate(paper_run / "poses.csv", rec / "truth.csv")
-    assert r["coverage"] == 1.0
+    assert r["coverage"] >= 0.97
     assert r["orientation_rmse_deg"] < 3.0 and r["position_rmse_mm"] < 10.0
 
 

@@ -43,8 +43,11 @@ def test_fast_reach_is_tracked_throughout(seed):
     run = _fast_reach(seed, TrackerConfig())
     peak = np.linalg.norm(run.truth.v, axis=1).max()
     assert peak > 1.4  # m/s: really a fast reach
-    assert run.lost_frames == 0
-    assert run.errors.coverage == 1.0
+    # At most two frames without a pose: frames whose markers were missed (fewer than
+    # min_markers taken), their prediction too uncertain to report. Reported, they had been
+    # 12-45 mm and up to 7 deg off (seed 0's frame 24, seed 2's 23 and 24).
+    assert run.lost_frames <= 2
+    assert run.errors.coverage >= 1 - 2 / run.errors.frames
     assert run.errors.orientation_rmse_deg <= 2.0, run.errors
     assert run.errors.position_rmse_mm <= 10.0, run.errors
     assert run.labelling["markers_correct"] >= 0.95, run.labelling
@@ -52,11 +55,15 @@ def test_fast_reach_is_tracked_throughout(seed):
 
 def test_without_the_manoeuvre_retry_the_fast_reach_is_lost():
     """The control: the same reach with the retry off loses the markers (all taken as clutter)
-    and the estimate runs away, so the test above measures the retry, not an easy recording."""
+    and the estimate runs away, so the test above measures the retry, not an easy recording.
+    The runaway is not reported: a frame or so of prediction, then no pose until the track
+    is found again (without the coasting bounds, the reported poses were 50+ mm off)."""
     run = _fast_reach(0, TrackerConfig(manoeuvre_accel=()))
-    coasting = sum(r.status == Status.COASTING for r in run.results)
-    assert coasting >= 5
-    assert run.errors.position_rmse_mm > 50.0
+    missed = sum(r.status in (Status.COASTING, Status.LOST) for r in run.results)
+    assert missed >= 5 and run.errors.coverage <= 1 - 5 / run.errors.frames
+    unbounded = TrackerConfig(manoeuvre_accel=(), coast_rot_sigma_deg=np.inf,
+                              coast_pos_sigma_mm=np.inf)
+    assert _fast_reach(0, unbounded).errors.position_rmse_mm > 50.0
 
 
 def test_compiled_path_and_generic_path_agree_on_manoeuvre_frames(monkeypatch):

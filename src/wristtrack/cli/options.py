@@ -15,9 +15,20 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a number >= 0 (inf: no bound)")
+    return value
+
+
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
     """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide,
-    --[no-]follow-offset and --fixed-noise, read back by :func:`tracker_config`."""
+    --[no-]follow-offset, --fixed-noise and --coast-limit, read back by
+    :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")
@@ -42,6 +53,13 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
         help="take the blobs' pixel noise and the skin slide as the model gives them instead of "
              "learning them from the recording (every recording weighed alike; summary.json "
              "says what was learned otherwise)")
+    parser.add_argument(
+        "--coast-limit", nargs=2, type=non_negative_float, metavar=("DEG", "MM"),
+        default=None,
+        help="a frame with too few markers reports the predicted pose only while that adds at "
+             "most DEG degrees and MM mm (1 sigma) to the last measured frame's uncertainty, "
+             "else no pose (status lost) while the track waits for the markers (default 2 10; "
+             "inf inf reports every prediction)")
 
 
 def tracker_config(args: argparse.Namespace):
@@ -49,11 +67,14 @@ def tracker_config(args: argparse.Namespace):
     from wristtrack.tracking.surface import SurfaceSettings
     from wristtrack.tracking.tracker import TrackerConfig
 
+    limit = {} if args.coast_limit is None else dict(
+        coast_rot_sigma_deg=args.coast_limit[0], coast_pos_sigma_mm=args.coast_limit[1])
     if args.model in ("paper", "paper_rpy"):
-        return TrackerConfig.paper(model=args.model)
+        return TrackerConfig.paper(model=args.model, **limit)
     return TrackerConfig(association=args.association, use_depth=not args.no_depth,
                          surface=None if args.no_skin_depth else SurfaceSettings(),
                          adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise,
-                         follow_slide=args.follow_slide, follow_offset=args.follow_offset)
+                         follow_slide=args.follow_slide, follow_offset=args.follow_offset,
+                         **limit)
 
 

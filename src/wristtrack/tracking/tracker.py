@@ -1,10 +1,10 @@
 """The tracker: one frame of detections in, one wrist estimate out.
 
 A small state machine: ``initialising`` until the least-squares initialisation succeeds, then
-``tracking`` (``coasting`` for a frame where no marker could be associated), ``lost`` after too
-many frames with too few markers or too many updates in a row whose normalised innovation
-squared is beyond its chi-square bound, from where it re-initialises by itself by fitting the
-layout.
+``tracking`` (``coasting`` for a frame where no marker could be associated, while the
+prediction is worth a pose: TrackerConfig.coast_rot_sigma_deg; ``lost`` beyond), ``lost`` after
+too many frames with too few markers or updates in a row whose normalised innovation squared is
+beyond its chi-square bound, from where it re-initialises by itself by fitting the layout.
 The fixed frame W0 is the hand frame of the first initialisation, refined once at the end of
 the still start that follows it (tracking/neutral.py: W0 fitted to all the still frames, and
 without hand.json the layout averaged over them); it never moves afterwards.
@@ -64,6 +64,8 @@ class _Track:
     weak_frames: int = 0
     inconsistent_frames: int = 0  # consecutive updates with NIS above its chi-square quantile
     R_prev: np.ndarray | None = None
+    updated_sigma: tuple = (0.0, 0.0)  # (rot_sigma_deg, pos_sigma_mm) with min_markers last
+    unmeasured_s: float = 0.0  # time since then, to the frame before
 
 
 @dataclass
@@ -300,7 +302,7 @@ class Tracker:
         if _undoubted(det) >= cfg.min_markers and hasattr(self.model, "angular_velocity"):
             out = self._manoeuvre_retry(det, track, dt, plain)
         x, P, labels, n_assoc, nis, dof, merged_markers = out
-        if not (_all_finite(x) and _all_finite(P)):  # never let a numerical failure leak out
+        if not (ukf.all_finite(x) and ukf.all_finite(P)):  # never let a numerical failure leak out
             self._lose()
             return self._empty(det, Status.LOST)
         # Only if its markers are off their blobs: realistic frames have harmless NIS outliers,
@@ -328,6 +330,7 @@ class Tracker:
             if refit is not None:
                 return self.start_track(det, refit)
         track.weak_frames = track.weak_frames + 1 if n_assoc < cfg.min_markers else 0
+        track.unmeasured_s = track.unmeasured_s + dt if n_assoc < cfg.min_markers else 0.0
         if track.weak_frames > cfg.lost_after:
             self._lose()
             return self._empty(det, Status.LOST)
@@ -413,9 +416,9 @@ class Tracker:
             )
             self._compiled = (compiled.load(), args)
         if (not self._compiled_usable or det.depth is None or det.count == 0
-                or self._gap_iterations(dt)):
+                or self._gap_iterations(dt + track.unmeasured_s)):
             return None
-        if not _all_finite(det.depth):  # a blob without depth is scored on its pixels alone
+        if not ukf.all_finite(det.depth):  # a blob without depth is scored on its pixels alone
             return None
         step, args = self._compiled
         # contiguous blobs and a float dt: numba compiles once per argument type
@@ -429,13 +432,17 @@ class Tracker:
     def _generic_frame(self, det: Detections, track: _Track, dt: float) -> tuple:
         """Any configuration, any frame: generic_step.StepResult as a tuple."""
         obs = self._observation(self.config.use_depth and det.depth is not None)
+        iterations = self._gap_iterations(dt + track.unmeasured_s)
         return tuple(generic_step(self.model, obs, track.x, track.P, dt, det, self.config,
-                                  self.assoc_params, self.camera, self._gap_iterations(dt)))
+                                  self.assoc_params, self.camera, iterations))
 
-    def _gap_iterations(self, dt: float) -> int:
-        """How many times a step of ``dt`` s iterates its update: after a gap (LONG_GAP_S),
-        TrackerConfig.gap_iterations; else none (the compiled step's frames)."""
-        return self.config.gap_iterations if dt > LONG_GAP_S else 0
+    def _gap_iterations(self, gap: float) -> int:
+        """How many times an update ``gap`` s after the last frame with enough markers iterates:
+        after LONG_GAP_S (a long step, or frames without markers, widened the prior),
+        TrackerConfig.gap_iterations; else none (the compiled step's frames). After a third of a
+        second without markers the first update had been 6.3 deg off, iterated 1.2
+        (tests/tracking/test_coasting.py)."""
+        return self.config.gap_iterations if gap > LONG_GAP_S else 0
 
     # -------------------------------------------------------------------------------- output
 
@@ -467,6 +474,13 @@ class Tracker:
             w0 = cov_k.diagonal()
         rot_sigma = math.degrees(math.sqrt(max(var[self.model.rotation].sum() + w0[:3].sum(), 0.0)))
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum() + w0[3:].sum(), 0.0))
+        if n_assoc >= self.config.min_markers:
+            track.updated_sigma = (rot_sigma, pos_sigma)
+        elif (rot_sigma**2 - track.updated_sigma[0] ** 2 > self.config.coast_rot_sigma_deg**2
+              or pos_sigma**2 - track.updated_sigma[1] ** 2 > self.config.coast_pos_sigma_mm**2):
+            return FrameResult.empty(self._frame, det.timestamp, Status.LOST, labels,
+                                     n_clutter=n_clutter, track_id=self._track_id,
+                                     side=self.layout.side)  # a guess no longer worth a pose
         return FrameResult(
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
             R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels,
@@ -475,19 +489,6 @@ class Tracker:
             rot_sigma_deg=rot_sigma, x=track.x.copy(), track_id=self._track_id,
             side=self.layout.side, merged=merged or {},
         )
-
-
-_ONES = np.ones(256)
-
-
-def _all_finite(a: np.ndarray) -> bool:
-    """np.isfinite(a).all() in one cheap call: a NaN or an inf anywhere makes the sum non-finite
-    (finite entries could only overflow it beyond 1e308). The sum is a dot product with ones,
-    which costs a fraction of a NumPy reduction's call overhead."""
-    flat = a.ravel()
-    if flat.size > _ONES.size:
-        return bool(np.isfinite(flat).all())
-    return math.isfinite(flat.dot(_ONES[: flat.size]))
 
 
 def _undoubted(det: Detections) -> int:
