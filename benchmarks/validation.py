@@ -338,8 +338,8 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "the back of the hand turns away from the camera for much of the stroke, and where it "
         "faces the camera a 1/60 s exposure smears each marker over several diameters; a frame "
         "whose markers are missed reports its prediction only while that is worth a pose "
-        "(`--coast-limit`), so coverage can fall below the frames in view, but no pose is "
-        "reported far off:",
+        "(`--coast-limit`), so coverage falls below the frames in view rather than report "
+        "extrapolations:",
         "",
         *_stress_rows(stress),
         "",
