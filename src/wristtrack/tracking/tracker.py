@@ -478,8 +478,8 @@ class Tracker:
             track.updated_sigma = (rot_sigma, pos_sigma)
         elif (rot_sigma**2 - track.updated_sigma[0] ** 2 > self.config.coast_rot_sigma_deg**2
               or pos_sigma**2 - track.updated_sigma[1] ** 2 > self.config.coast_pos_sigma_mm**2):
-            return FrameResult.empty(self._frame, det.timestamp, Status.LOST, labels,
-                                     n_clutter=n_clutter, track_id=self._track_id,
+            return FrameResult.empty(self._frame, det.timestamp, Status.LOST, det.count,
+                                     track_id=self._track_id,
                                      side=self.layout.side)  # a guess no longer worth a pose
         return FrameResult(
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
