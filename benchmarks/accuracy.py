@@ -76,7 +76,7 @@ def _smoothed(camera: Camera, layout: HandLayout | None, detections: list[Detect
     from wristtrack.tracking.smoothed_results import smooth_results
 
     tracker, results = _default_tracker(camera, layout, detections, config)
-    return smooth_results(tracker.model, results, tracker.config.ukf)
+    return smooth_results(tracker.model, results, tracker.config.ukf, tracker.config.coast_limit)
 
 
 def _slide_as_noise(camera: Camera, layout: HandLayout | None, detections: list[Detections]):

@@ -98,3 +98,37 @@ def every_effect(tmp_path_factory):
     from benchmarks.robustness import render_condition
 
     return render_condition(tmp_path_factory.mktemp("every-effect"), "all (preset real)", 0, 136)
+
+
+class HiddenMarkers:
+    """The 'mix' movement (simulated detections, seed 1) with every blob gone over the frames
+    ``hidden`` (a third of a second at 30 fps: a hand behind an obstacle)."""
+
+    hidden = (70, 80)
+
+    def run(self, config):
+        """Track it with TrackerConfig ``config``: the truth, the results and the tracker."""
+        import numpy as np
+
+        from wristtrack.detect.detections import Detections
+        from wristtrack.sim.detections import NoiseModel, simulate_detections
+        from wristtrack.sim.motion import scenario
+        from wristtrack.tracking.tracker import Tracker
+
+        rng = np.random.default_rng(1)
+        truth, camera, layout = scenario("mix", rng=rng)
+        frames = simulate_detections(truth, camera, layout, NoiseModel(), rng)
+        tracker = Tracker(camera, layout, config)
+        results = []
+        for k, f in enumerate(frames):
+            det = f.detections
+            if self.hidden[0] <= k < self.hidden[1]:
+                det = Detections(det.timestamp, np.zeros((0, 2)), np.zeros(0))
+            results.append(tracker.step(det))
+        return truth, results, tracker
+
+
+@pytest.fixture(scope="session")
+def hidden_markers() -> HiddenMarkers:
+    """Markers hidden for a third of a second mid-movement (:class:`HiddenMarkers`)."""
+    return HiddenMarkers()

@@ -48,3 +48,30 @@ def test_the_smoothed_still_start_keeps_its_own_camera_poses(tmp_path):
     t_mem = np.stack([r.t_ch for r in memory])
     np.testing.assert_allclose(R[ok], R_mem, atol=1e-6)
     np.testing.assert_allclose(t[ok], t_mem, atol=1e-8)
+
+
+def test_predictions_not_reported_are_smoothed_from_the_files_as_in_memory(tmp_path,
+                                                                             hidden_markers):
+    """A third of a second without blobs (tests/tracking/test_coasting.py): the state log keeps
+    the predictions the filter did not report, so ``track --smooth`` carries the track across
+    and reports the gap's ends as the smoother in memory does, row for row."""
+    config, (start, end) = TrackerConfig(), hidden_markers.hidden
+    truth, results, tracker = hidden_markers.run(config)
+    model = tracker.model
+    states = StateWriter(tmp_path / STATES_FILE, model.initial_state(np.eye(3), np.zeros(3)).size,
+                         model.dim)
+    with PosesWriter(tmp_path / "poses.csv") as poses:
+        for r in results:
+            poses.write_result(r)
+            states.write(r.frame, r.timestamp, r)
+    states.close()
+    smooth_run(tmp_path, model, config.ukf, coast_limit=config.coast_limit)
+    rows = read_poses(tmp_path / "poses.csv")
+    memory = smooth_results(model, results, config.ukf, config.coast_limit)
+    status = [str(s.status) for s in memory]
+    assert list(rows["status"]) == status
+    gap = rows["status"][start:end]
+    assert "coasting" in gap and "lost" in gap
+    R, t = rows_to_poses(rows)
+    shown = np.isfinite(t).all(axis=1)
+    np.testing.assert_allclose(t[shown], np.stack([s.t_ch for s in memory])[shown], atol=1e-8)

@@ -3,10 +3,10 @@
 ``track --smooth`` needs every frame's filter state and covariance after the run; keeping them
 in memory would make memory grow with the recording, so they go to ``filter_states.f64`` as the
 run goes: a header of four float64 (format version, state size D, tangent size n, record size)
-and then one fixed-size float64 record per frame: frame, timestamp, track id (-1 = no
-estimate), the state (D) and the covariance (n*n). One record per poses.csv row, so a resumed
-run truncates both to the same frame count. A record cut short by an interrupted run is
-ignored by the reader.
+and then one fixed-size float64 record per frame: frame, timestamp, track id (-1 = no state: no
+track, or nothing predicted), the state (D) and the covariance (n*n). One record per poses.csv
+row, so a resumed run truncates both to the same frame count. A record cut short by an
+interrupted run is ignored by the reader.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ class StateLog:
 
     frame: np.ndarray  # (N,) int
     timestamp: np.ndarray  # (N,)
-    track_id: np.ndarray  # (N,) int, -1 where the frame has no estimate
+    track_id: np.ndarray  # (N,) int, -1 where the frame has no state
     x: np.ndarray  # (N, D)
     P: np.ndarray  # (N, n, n)
 
@@ -56,10 +56,12 @@ class StateWriter:
         self._buffer = np.empty(self.record)
 
     def write(self, frame: int, timestamp: float, result) -> None:
-        """Record a tracker.FrameResult (its state where it has an estimate, else NaN)."""
+        """Record a tracker.FrameResult: its state where it has one (an estimate, or a track's
+        prediction too uncertain to report, which the smoother may still use), else NaN."""
         buf = self._buffer
         buf[0], buf[1] = frame, timestamp
-        if result is not None and result.has_estimate and result.x is not None:
+        if (result is not None and result.x is not None and result.cov is not None
+                and result.track_id >= 0):
             buf[2] = result.track_id
             buf[3 : 3 + self.D] = result.x
             buf[3 + self.D :] = result.cov.ravel()

@@ -38,9 +38,12 @@ def smooth_run(
     model,
     params: UKFParams = _DEFAULT_PARAMS,
     side: str = "right",
+    coast_limit: tuple[float, float] | None = None,
 ) -> list[FrameResult]:
     """Smooth the run in ``out``; returns one FrameResult per tracked frame (smoothed where it
-    has an estimate) for the summary. Removes the state file once poses.csv is rewritten."""
+    has an estimate, and where a prediction the filter did not report is, smoothed, within
+    ``coast_limit``: smoothed_results.smooth_results) for the summary. Removes the state file
+    once poses.csv is rewritten."""
     out = Path(out)
     poses_path, states_path = out / "poses.csv", out / STATES_FILE
     header, rows = read_pose_table(poses_path)
@@ -56,7 +59,7 @@ def smooth_run(
         _filtered_result(row, col, states, k, model, side) for k, row in enumerate(body)
     ]
     tracked = [r for r in results if r is not None]
-    smoothed = iter(smooth_results(model, tracked, params))
+    smoothed = iter(smooth_results(model, tracked, params, coast_limit))
     out_rows = []
     summary_results = []
     for row, r in zip(body, results, strict=True):

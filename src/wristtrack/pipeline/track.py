@@ -353,7 +353,8 @@ def _finish(
 def _smoothed_summary(out: Path, tracker: Tracker, config: TrackerConfig) -> SummaryAccumulator:
     """Smooth the run in ``out``; the summary of the smoothed poses."""
     summary = SummaryAccumulator()
-    for result in smooth_run(out, tracker.model, config.ukf, tracker.layout.side):
+    for result in smooth_run(out, tracker.model, config.ukf, tracker.layout.side,
+                             config.coast_limit):
         summary.add(result)
     return summary
 

@@ -115,6 +115,12 @@ class TrackerConfig:
         """Whether the tracker learns the skin between the markers and reads its depth."""
         return self.surface is not None and self.use_depth
 
+    @property
+    def coast_limit(self) -> tuple[float, float]:
+        """(coast_rot_sigma_deg, coast_pos_sigma_mm): what a frame without enough markers may
+        add to the last measured frame's 1-sigma and still report a pose (also when smoothed)."""
+        return self.coast_rot_sigma_deg, self.coast_pos_sigma_mm
+
     @classmethod
     def paper(cls, **kw) -> TrackerConfig:
         """The paper's method: Euler-angle state, per-blob association, depth only to initialise.

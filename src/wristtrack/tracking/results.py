@@ -65,13 +65,23 @@ class FrameResult:
         n_visible: int = 0,
         **kw,
     ) -> FrameResult:
-        """A result without an estimate (NaN poses, no covariance). ``labels`` are the blobs'
-        labels, or a number of blobs, all then clutter; ``n_clutter`` defaults to the blobs
-        labelled clutter. Other fields (``side``, ``track_id``, ...) by keyword."""
+        """A result without an estimate (NaN poses; no covariance unless given). ``labels`` are
+        the blobs' labels, or a number of blobs, all then clutter; ``n_clutter`` defaults to the
+        blobs labelled clutter. Other fields (``side``, ``track_id``, a state ``x`` and ``cov``
+        the smoother may use, ...) by keyword."""
         if np.ndim(labels) == 0:
             labels = np.full(int(labels), -1)
         kw.setdefault("n_clutter", int(np.sum(labels < 0)))
+        kw.setdefault("cov", None)
         return cls(
             frame=frame, timestamp=timestamp, status=status, R_ch=_NAN33, t_ch=_NAN3, R=_NAN33,
-            p=_NAN3, v=_NAN3, w=_NAN3, cov=None, labels=labels, n_visible=n_visible, **kw,
+            p=_NAN3, v=_NAN3, w=_NAN3, labels=labels, n_visible=n_visible, **kw,
         )  # fmt: skip
+
+
+def within_coast_limit(sigmas: tuple[float, float], measured: tuple[float, float],
+                       limit: tuple[float, float]) -> bool:
+    """Whether a frame without enough markers, its (rot_sigma_deg, pos_sigma_mm) ``sigmas``,
+    adds no more than ``limit`` (deg, mm; in quadrature) to the last measured frame's
+    ``measured`` and so reports its pose (TrackerConfig.coast_limit)."""
+    return all(s * s - m * m <= b * b for s, m, b in zip(sigmas, measured, limit, strict=True))

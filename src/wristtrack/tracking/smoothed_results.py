@@ -1,7 +1,11 @@
 """The tracker's results smoothed: the unscented RTS smoother (filter/smoother.py) run over each
 track of a finished run, with the poses, velocities and uncertainties rebuilt from the smoothed
 states. Each track (from one initialisation to the loss of the hand) is smoothed on its own;
-frames without an estimate stay without one.
+frames without an estimate stay without one, but for the frames of a track the filter predicted
+and did not report (too few markers, too uncertain: TrackerConfig.coast_limit). Those carry the
+track across (the smoother uses the frames after them for those before) and are reported
+(``coasting``) where the smoothed uncertainty is within the same bounds, against the last
+reported frame before them: within a short gap the frames after it pin the pose down again.
 """
 
 from __future__ import annotations
@@ -15,17 +19,18 @@ from wristtrack.filter.smoother import rts_smooth
 from wristtrack.filter.ukf import ManifoldModel, UKFParams
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.tracking.observation import hand_in_camera
-from wristtrack.tracking.results import FrameResult
+from wristtrack.tracking.results import FrameResult, Status, within_coast_limit
 
 _DEFAULT_PARAMS = UKFParams()
 
 
 def track_segments(results: list[FrameResult]) -> list[np.ndarray]:
-    """Frame indices of each run of estimates from one initialisation (one track), in order."""
+    """Frame indices of each run of filter states from one initialisation (one track), in
+    order: the estimates, and the predictions not reported between them."""
     segments: list[list[int]] = []
     last_id = None
     for i, r in enumerate(results):
-        if not r.has_estimate or r.x is None or r.cov is None:
+        if r.x is None or r.cov is None or r.track_id < 0:
             last_id = None
             continue
         if r.track_id != last_id:
@@ -36,9 +41,13 @@ def track_segments(results: list[FrameResult]) -> list[np.ndarray]:
 
 
 def smooth_results(
-    model: ManifoldModel, results: list[FrameResult], params: UKFParams = _DEFAULT_PARAMS
+    model: ManifoldModel, results: list[FrameResult], params: UKFParams = _DEFAULT_PARAMS,
+    coast_limit: tuple[float, float] | None = None,
 ) -> list[FrameResult]:
-    """The run's results with every estimate replaced by its smoothed value.
+    """The run's results with every estimate replaced by its smoothed value, and the unreported
+    predictions of a track whose smoothed 1-sigma adds at most ``coast_limit`` (deg, mm;
+    TrackerConfig.coast_limit; None: none is reported) to that of the last frame tracked
+    before them reported as ``coasting``.
 
     Poses, velocities, covariances and uncertainties are smoothed; everything the filter saw
     (labels, markers, clutter, NIS) is kept. The frames are recovered from the filtered results,
@@ -50,8 +59,11 @@ def smooth_results(
     """
     out = list(results)
     for seg in track_segments(results):
-        R_c0, t_c0 = _w0(results[seg[0]], *(a[0] for a in model.pose(results[seg[0]].x[None])))
-        last = results[seg[-1]]
+        shown = [i for i in seg if results[i].has_estimate]  # a track starts with a fix
+        if not shown:
+            continue
+        first, last = results[shown[0]], results[shown[-1]]
+        R_c0, t_c0 = _w0(first, *(a[0] for a in model.pose(first.x[None])))
         R_rep, t_rep = _w0(last, last.R, last.p)
         turn = R_rep.T @ R_c0
         xs = np.stack([results[i].x for i in seg])
@@ -59,7 +71,7 @@ def smooth_results(
         times = np.array([results[i].timestamp for i in seg])
         xs_s, Ps_s = rts_smooth(model, xs, Ps, times, params)
         R_all, p_all = model.pose(xs_s)
-        R_prev = None
+        R_prev, reported = None, (math.inf, math.inf)
         for j, i in enumerate(seg):
             R, p = R_all[j], p_all[j]
             v, w = model.velocities(xs_s[j])
@@ -71,10 +83,20 @@ def smooth_results(
                 )
             R_prev = R
             var = Ps_s[j].diagonal()
+            sigmas = (math.degrees(math.sqrt(max(var[model.rotation].sum(), 0.0))),
+                      1e3 * math.sqrt(max(var[model.position].sum(), 0.0)))
+            status = results[i].status
+            if status == Status.TRACKING:
+                reported = sigmas
+            elif not results[i].has_estimate:  # a prediction the filter did not report
+                if coast_limit is None or not within_coast_limit(sigmas, reported, coast_limit):
+                    continue  # still too uncertain to report
+                status = Status.COASTING
             R_ch, t_ch = hand_in_camera(R, p, R_c0, t_c0)
             R_out, p_out = relative_pose(R_rep, t_rep, R_ch, t_ch)
             out[i] = replace(
                 results[i],
+                status=status,
                 R_ch=R_ch,
                 t_ch=t_ch,
                 R=R_out,
@@ -83,8 +105,8 @@ def smooth_results(
                 w=turn @ np.asarray(w, dtype=float),
                 cov=Ps_s[j],
                 x=xs_s[j],
-                pos_sigma_mm=1e3 * math.sqrt(max(var[model.position].sum(), 0.0)),
-                rot_sigma_deg=math.degrees(math.sqrt(max(var[model.rotation].sum(), 0.0))),
+                pos_sigma_mm=sigmas[1],
+                rot_sigma_deg=sigmas[0],
             )
     return out
 

@@ -44,7 +44,7 @@ from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
 from wristtrack.tracking.offset_model import carry_offset, registration_estimate
 from wristtrack.tracking.restart import moving_start
-from wristtrack.tracking.results import FrameResult, Status
+from wristtrack.tracking.results import FrameResult, Status, within_coast_limit
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
 
@@ -476,11 +476,11 @@ class Tracker:
         pos_sigma = 1e3 * math.sqrt(max(var[self.model.position].sum() + w0[3:].sum(), 0.0))
         if n_assoc >= self.config.min_markers:
             track.updated_sigma = (rot_sigma, pos_sigma)
-        elif (rot_sigma**2 - track.updated_sigma[0] ** 2 > self.config.coast_rot_sigma_deg**2
-              or pos_sigma**2 - track.updated_sigma[1] ** 2 > self.config.coast_pos_sigma_mm**2):
+        elif not within_coast_limit((rot_sigma, pos_sigma), track.updated_sigma,
+                                    self.config.coast_limit):  # a guess no longer worth a pose
             return FrameResult.empty(self._frame, det.timestamp, Status.LOST, det.count,
-                                     track_id=self._track_id,
-                                     side=self.layout.side)  # a guess no longer worth a pose
+                                     track_id=self._track_id, side=self.layout.side,
+                                     x=track.x.copy(), cov=track.P.copy())  # for the smoother
         return FrameResult(
             frame=self._frame, timestamp=det.timestamp, status=status, R_ch=R_ch, t_ch=t_ch,
             R=R_rel, p=p, v=v.copy(), w=w, cov=track.P.copy(), labels=labels,
