@@ -48,10 +48,9 @@ from wristtrack.tracking.results import FrameResult, Status, within_coast_limit
 
 __all__ = ["FrameResult", "Status", "Tracker", "TrackerConfig"]
 
-# A step longer than this (s) is a gap, not a frame period (frames dropped or not delivered):
-# the prediction may be far off, and the update is iterated over its posterior
-# (TrackerConfig.gap_iterations; in the generic step, which the compiled one leaves such frames
-# to).
+# This long (s) since the last frame with enough markers is a gap (frames dropped, undelivered
+# or without markers): the prediction may be far off, and the update is iterated over its
+# posterior (TrackerConfig.gap_iterations, in the generic step: the compiled one declines).
 LONG_GAP_S = 0.2
 _MIN_REFIT = 4  # markers a re-fit keeps at least: a pose from their pixels alone (pose_fit)
 
@@ -150,11 +149,13 @@ class Tracker:
 
     @property
     def depth_registration(self) -> dict | None:
-        """The depth map's offset from the colour image as the running track, else the last one,
-        estimated it (the camera's: offset_model.registration_estimate); None where not carried."""
+        """offset_model.registration_estimate of the camera's last state (None: not carried)."""
+        return registration_estimate(self.model, *self._last_state())
+
+    def _last_state(self) -> tuple:
+        """(x, P) of the running track, else the last lost one's (for the camera's offset)."""
         last = getattr(self, "_camera_state", (None, None))  # (checkpoints from before it)
-        state = (self._track.x, self._track.P) if self._track else last
-        return registration_estimate(self.model, *state)
+        return (self._track.x, self._track.P) if self._track else last
 
     def _empty(self, det: Detections, status: Status) -> FrameResult:
         return FrameResult.empty(self._frame, det.timestamp, status, det.count)
@@ -241,8 +242,7 @@ class Tracker:
             if old is not None and det.timestamp - old.timestamp <= LONG_GAP_S:
                 x = moving_start(self.model, x, old.x, det.timestamp - old.timestamp)
             # the depth offset is the camera's: kept from the track before, even a lost one
-            before = (old.x, old.P) if old else getattr(self, "_camera_state", (None, None))
-            x, P = carry_offset(self.model, x, P, *before)
+            x, P = carry_offset(self.model, x, P, *self._last_state())
         else:  # the first fixes W0; its uncertainty is carried apart (_result)
             # the initialisation's covariance is over camera-frame perturbations; rotate it to W0
             rot = np.kron(np.eye(2), self.R_c0.T)
