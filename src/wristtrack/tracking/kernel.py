@@ -394,8 +394,7 @@ def _associate(C, mean, uv, depth, par, labels, blob_of):
 def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, ro, P_out, par):
     """ukf.update with the associated markers' rows (axis-major, in marker order), their
     blobs' pixel rows raised by blob_var, and the retraction of the correction into (q, pvw, sl,
-    ro);
-    P_out gets the covariance. Returns the NIS, NaN where the innovation covariance is not
+    ro); P_out gets the covariance. Returns the NIS, NaN where the innovation covariance is not
     positive definite."""
     J, n = blob_of.shape[0], P_out.shape[0]
     m = 3 * J
