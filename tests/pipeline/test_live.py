@@ -48,12 +48,14 @@ def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     handed over a frame or two later (pipeline/live/loop.py), which moves the blobs' centres by
     a fraction of a pixel; on sharp blobs the out-of-plane angles rest on that fraction, which
     acts as a measurement noise of their own on each run. So a frame's two orientations agree
-    within ``deg`` or, where larger, the spread of the difference of two estimates each with the
-    reported 1-sigma uncertainty, sqrt(2) sigma (the reach's frames 61-67: up to 0.65 deg apart
-    at 0.56 reported on a loaded machine that dropped frames, 0.43 at 0.67 on an idle one, each
-    run within 0.3 deg of the truth there), and their positions within ``mm`` or, where larger,
-    sqrt(2) times the reported position sigma (a loaded machine that kept 4 of 60 frames had
-    them 1.6 mm apart at one)."""
+    within ``deg`` or, where larger, three times the spread of the difference of two estimates
+    each with the reported 1-sigma uncertainty, 3 sqrt(2) sigma (the reach's frames 61-67: up to
+    0.65 deg apart at 0.56 reported on a loaded machine that dropped frames, 0.43 at 0.67 on an
+    idle one, each run within 0.3 deg of the truth there), and their positions within ``mm`` or,
+    where larger, 3 sqrt(2) times the reported position sigma. A run that kept 4 of 60 frames,
+    each after a gap that leaves it to its own blobs, had two of them 1.57 mm apart at 1.02 mm
+    reported: 1.1 sigma of the difference, as expected of two draws of the blobs' noise; a bound
+    at one sigma of the difference fails such a run a third of the time."""
     taken = live["status"] != "dropped"
     cut = cut_recording(reach, np.asarray(live["frame"][taken], int), tmp_path / "taken")
     with FolderRecording(cut) as rec:
@@ -66,11 +68,11 @@ def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     R_live, t_live = rows_to_poses(live)
     R_off, t_off = rows_to_poses(offline)
     ang = np.degrees(rotation_distance(R_live[taken][done], R_off[done]))
-    tolerance = np.maximum(deg, np.sqrt(2.0) * np.asarray(live["rot_sigma_deg"])[taken][done])
+    tolerance = np.maximum(deg, 3 * np.sqrt(2.0) * np.asarray(live["rot_sigma_deg"])[taken][done])
     beyond = ang > tolerance
     assert not beyond.any(), np.c_[live["frame"][taken][done], ang, tolerance][beyond]
     err = np.linalg.norm(t_live[taken][done] - t_off[done], axis=1) * 1e3
-    limit = np.maximum(mm, np.sqrt(2.0) * np.asarray(live["pos_sigma_mm"])[taken][done])
+    limit = np.maximum(mm, 3 * np.sqrt(2.0) * np.asarray(live["pos_sigma_mm"])[taken][done])
     assert not (err > limit).any(), np.c_[live["frame"][taken][done], err, limit][err > limit]
 
 
