@@ -25,10 +25,10 @@ class StepTiming:
     stonesoup_frames: int = 0
     generic_ms: float = float("nan")  # the generic NumPy step (the reference) on the same frames
     kind: str = ""  # which step ``ours_ms`` is (compiled.describe())
-    # the same step with the skin slide as shared noise (track --no-follow-slide): 15 states
-    # instead of 17, FilterPy's model exactly
+    # the same step with the skin slide as shared noise (track --no-follow-slide): 12 states
+    # instead of 14, FilterPy's model exactly
     as_noise_ms: float = float("nan")
-    # with the depth map's offset in the state too (--follow-offset): 19
+    # with the depth map's offset in the state too (--follow-offset): 16
     offset_ms: float = float("nan")
 
 
@@ -96,7 +96,7 @@ def _time_stonesoup(frames, camera, layout) -> float | None:
 
 def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:
     """FilterPy's UKF on the same model, written as FilterPy expects: one state vector (rotation
-    vector, p, v, w, alpha) per call of fx and hx, additive noise, associations given."""
+    vector, p, v, w) per call of fx and hx, additive noise, associations given."""
     try:
         import cv2
         from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
@@ -106,16 +106,12 @@ def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:
     f_xy = np.array([camera.fx, camera.fy])
     c_xy = np.array([camera.cx, camera.cy])
 
-    keep = tracker.model.acceleration_keep
-
     def fx(x, dt):
         R = cv2.Rodrigues(x[:3])[0]
-        R = cv2.Rodrigues((x[9:12] + 0.5 * dt * x[12:15]) * dt)[0] @ R
+        R = cv2.Rodrigues(x[9:12] * dt)[0] @ R
         out = x.copy()
         out[:3] = cv2.Rodrigues(R)[0].ravel()
         out[3:6] += x[6:9] * dt
-        out[9:12] += x[12:15] * dt
-        out[12:15] *= keep(dt)
         return out
 
     def hx(x):
@@ -125,12 +121,11 @@ def _time_filterpy(tracker: Tracker, frames, camera, layout) -> float | None:
         return np.column_stack((uv, cam[:, 2])).ravel()
 
     dt = float(np.median(np.diff([f.detections.timestamp for f in frames])))
-    n = ConstantRateModel.dim
-    points = MerweScaledSigmaPoints(n, alpha=1.0, beta=2.0, kappa=0.0)
-    f = UnscentedKalmanFilter(dim_x=n, dim_z=18, dt=dt, hx=hx, fx=fx, points=points)
-    f.x = np.zeros(n)
-    f.P = np.eye(n) * 1e-4
-    f.Q = np.eye(n) * 1e-6
+    points = MerweScaledSigmaPoints(12, alpha=1.0, beta=2.0, kappa=0.0)
+    f = UnscentedKalmanFilter(dim_x=12, dim_z=18, dt=dt, hx=hx, fx=fx, points=points)
+    f.x = np.zeros(12)
+    f.P = np.eye(12) * 1e-4
+    f.Q = np.eye(12) * 1e-6
     obs = MarkerObservation(camera, pts, R_c0, t_c0, ConstantRateModel.pose, True)
     at_w0 = ConstantRateModel.initial_state(np.eye(3), *np.zeros((3, 3)))  # the noise's pose
     times = []
@@ -165,9 +160,9 @@ def step_section(step: StepTiming) -> list[str]:
         f"{step.frames} frames of the same run. The tracker's step as it runs "
         f"({step.kind}), its generic NumPy step (the reference, which every other "
         "configuration runs), the step with the skin slide as shared noise "
-        "(`--no-follow-slide`: FilterPy's 15 states; the default carries the slide along the "
-        "hand too, 17) and with the depth map's offset from the colour image in the state "
-        "as well (`--follow-offset`: 19) on the same frames.",
+        "(`--no-follow-slide`: FilterPy's 12 states; the default carries the slide along the "
+        "hand too, 14) and with the depth map's offset from the colour image in the state "
+        "as well (`--follow-offset`: 16) on the same frames.",
         "",
         "| | median per step (ms) | FilterPy's time / this one |",
         "|---|---|---|",

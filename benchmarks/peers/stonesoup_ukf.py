@@ -7,12 +7,12 @@ wrapped as Stone Soup transition and measurement models; initialisation (labelli
 pose, which Stone Soup does not do for a rigid marker set) is wristtrack's own ``initialise``.
 
 State. Stone Soup's state is a plain vector, so the orientation cannot live on SO(3) as in our
-filter. We use a rotation vector relative to the initial pose: x = (phi, p, v, w, alpha), 15-D,
-with R = exp(phi) the hand orientation relative to W0 (the hand frame at initialisation) and p,
-v, w, alpha as in ``models.ConstantRateModel``. The motion is that model's: R+ = exp((w + alpha
-dt / 2) dt) R, p+ = p + v dt, w+ = w + alpha dt, alpha+ = exp(-dt / tau) alpha, driven by the
-same noises; Stone Soup's UKF takes additive noise, so the noise covariance is the discrete one
-of that model in these coordinates (exact for p and v, first-order for the rotation vector).
+filter. We use a rotation vector relative to the initial pose: x = (phi, p, v, w), 12-D, with
+R = exp(phi) the hand orientation relative to W0 (the hand frame at initialisation) and p, v, w
+as in ``motion.ConstantRateModel``. The motion is that model's: R+ = exp(w dt) R, p+ = p + v dt,
+constant v and w driven by random-walk accelerations of the same densities; Stone Soup's UKF
+takes additive noise, so the noise covariance is the discrete one of that model in these
+coordinates (exact for p and v, first-order for the rotation vector).
 
 Measurements. Each marker is one measurement model (u, v, depth z of its centre, noise as
 ``observation.MeasurementNoise`` at the predicted depth; pixels only for frames without depth).
@@ -55,11 +55,10 @@ from wristtrack.tracking.observation import MarkerObservation, MeasurementNoise
 from wristtrack.tracking.tracker import FrameResult, Status, TrackerConfig
 
 _EPOCH = datetime(2000, 1, 1)
-_STATE = ConstantRateModel.dim  # (phi, p, v, w, alpha)
 
 
 def _rotvec_pose(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R relative to W0 (S,3,3), p (S,3)) of rotation-vector states X (S,15)."""
+    """(R relative to W0 (S,3,3), p (S,3)) of rotation-vector states X (S,12)."""
     return so3_exp(X[:, :3]), X[:, 3:6]
 
 
@@ -70,18 +69,15 @@ class RotvecConstantRate(TransitionModel, GaussianModel):
 
     @property
     def ndim_state(self) -> int:
-        return _STATE
+        return 12
 
     def function(self, state, noise=False, **kwargs):
         dt = kwargs["time_interval"].total_seconds()
-        X = np.asarray(state.state_vector, dtype=float).T  # (S, 15)
+        X = np.asarray(state.state_vector, dtype=float).T  # (S, 12)
         out = X.copy()
         if dt:
-            turn = (X[:, 9:12] + 0.5 * dt * X[:, 12:15]) * dt
-            out[:, :3] = so3_log(so3_exp(turn) @ so3_exp(X[:, :3]))
+            out[:, :3] = so3_log(so3_exp(X[:, 9:12] * dt) @ so3_exp(X[:, :3]))
             out[:, 3:6] += X[:, 6:9] * dt
-            out[:, 9:12] += X[:, 12:15] * dt
-            out[:, 12:15] *= ConstantRateModel(self.noise).acceleration_keep(dt)
         out = StateVectors(out.T)
         if noise is None or isinstance(noise, bool):
             noise = self.rvs(num_samples=out.shape[1], **kwargs) if noise else 0
@@ -89,17 +85,14 @@ class RotvecConstantRate(TransitionModel, GaussianModel):
 
     def covar(self, time_interval, **kwargs) -> CovarianceMatrix:
         dt = time_interval.total_seconds()
-        Q = np.zeros((_STATE, _STATE))
+        Q = np.zeros((12, 12))
         # noise a (density q) enters as v += a dt, p += a dt^2 / 2 with Var(a) = q / dt; the
-        # angular acceleration's white share likewise into w and (midpoint rule) the rotation
+        # angular acceleration likewise into w and (midpoint rule) the rotation
         for pos, vel, q in ((3, 6, self.noise.linear_accel), (0, 9, self.noise.angular_accel)):
             for i in range(3):
                 Q[pos + i, pos + i] = q * dt**3 / 4
                 Q[pos + i, vel + i] = Q[vel + i, pos + i] = q * dt**2 / 2
                 Q[vel + i, vel + i] = q * dt
-        # and the angular acceleration's innovation into itself
-        keep = ConstantRateModel(self.noise).acceleration_keep(dt)
-        Q[12:, 12:] = np.eye(3) * self.noise.angular_accel_sigma**2 * (1.0 - keep * keep)
         return CovarianceMatrix(Q)
 
 
@@ -186,7 +179,7 @@ class StoneSoupTracker:
         n_assoc = 0
         for j in np.flatnonzero(expected):
             model = MarkerMeasurement(
-                ndim_state=_STATE, mapping=tuple(range(_STATE)), noise_covar=np.diag(var[j]),
+                ndim_state=12, mapping=tuple(range(12)), noise_covar=np.diag(var[j]),
                 observation=obs, marker=int(j),
             )
             updater = UnscentedKalmanUpdater(model, **self.ukf_params)
@@ -225,8 +218,7 @@ class StoneSoupTracker:
         self.R_c0, self.t_c0, self.layout = init.R_ch, init.t_ch, init.layout
         rot = np.kron(np.eye(2), self.R_c0.T)  # camera-frame pose covariance -> W0
         P0 = ConstantRateModel().initial_covariance(rot @ init.cov @ rot.T)
-        self.track = Track([GaussianState(StateVector(np.zeros(_STATE)), CovarianceMatrix(P0),
-                                          when)])
+        self.track = Track([GaussianState(StateVector(np.zeros(12)), CovarianceMatrix(P0), when)])
         return self._result(det, Status.TRACKING, init.labels, int(np.sum(init.labels >= 0)))
 
     def _result(self, det, status, labels, n_assoc) -> FrameResult:

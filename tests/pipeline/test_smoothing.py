@@ -2,11 +2,9 @@
 smoother run on the tracker's own results."""
 
 import numpy as np
-import pytest
 
-from wristtrack.errors import InputError
 from wristtrack.geometry import rotation_distance
-from wristtrack.io.poses import COLUMNS, PosesWriter, read_poses, rows_to_poses
+from wristtrack.io.poses import PosesWriter, read_poses, rows_to_poses
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.sim.detections import NoiseModel, simulate_detections
@@ -77,14 +75,3 @@ def test_predictions_not_reported_are_smoothed_from_the_files_as_in_memory(tmp_p
     R, t = rows_to_poses(rows)
     shown = np.isfinite(t).all(axis=1)
     np.testing.assert_allclose(t[shown], np.stack([s.t_ch for s in memory])[shown], atol=1e-8)
-
-
-def test_a_state_log_of_another_state_model_is_refused_in_one_line(tmp_path):
-    """A run tracked by a version whose state had other dimensions (before the angular
-    acceleration: 14) is not smoothed with this one's model: one clear InputError."""
-    (tmp_path / "poses.csv").write_text(",".join(COLUMNS) + "\n")
-    StateWriter(tmp_path / STATES_FILE, 20, 14).close()
-    model = Tracker(*scenario("flexion", rng=0)[1:], TrackerConfig()).model
-    with pytest.raises(InputError, match="14 dimensions.*track the recording again") as err:
-        smooth_run(tmp_path, model)
-    assert "\n" not in str(err.value)

@@ -70,13 +70,11 @@ def _random_frame(rng, obs, turn=(0.0, 0.0, 0.0), states="rigid"):
     ``turn``: a rotation vector (W0 axes) the random orientation is drawn about; ``states``:
     what the state carries after the constant-rate model's (STATES: the skin slide,
     SlidingSkinModel's, a few mm; the depth offset, DepthOffsetModel's, a few px)."""
-    # rad^2, m^2, (m/s)^2, (rad/s)^2, (rad/s^2)^2
-    scales = np.repeat([3e-4, 4e-6, 2.5e-3, 0.09, 4.0], 3)
+    scales = np.repeat([3e-4, 4e-6, 2.5e-3, 0.09], 3)  # rad^2, m^2, (m/s)^2, (rad/s)^2
     R = Rotation.from_rotvec(np.asarray(turn) + rng.normal(0, 0.3, 3)).as_matrix()
     x = ConstantRateModel.initial_state(
         R, rng.normal(0, 0.03, 3), rng.normal(0, 0.2, 3), rng.normal(0, 1.0, 3)
     )
-    x[ConstantRateModel.state_size - 3:] = rng.normal(0, 2.0, 3)  # the angular acceleration
     if states != "rigid":
         scales = np.concatenate((scales, [2e-6, 3e-7]))  # m^2, distal and lateral
         x = np.concatenate((x, rng.normal(0, [1.5e-3, 5e-4])))

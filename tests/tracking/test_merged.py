@@ -103,7 +103,7 @@ def _overlap_frame(merged_blob: bool):
     if merged_blob:
         y = np.vstack((y[:4], y[4:].mean(0)))
     det = Detections(1.0, y[:, :2].copy(), y[:, 2].copy())
-    P = np.diag(np.repeat([np.radians(1.5) ** 2, 4e-6, 1e-4, 1e-2, 1.0], 3))
+    P = np.diag(np.repeat([np.radians(1.5) ** 2, 4e-6, 1e-4, 1e-2], 3))
     return tracker, x, P, truth, det
 
 
@@ -118,7 +118,7 @@ def test_the_compiled_step_leaves_a_frame_with_overlapping_markers_to_the_generi
     y = obs(x[None]).reshape(6, 3)
     y = np.vstack((y[:4], 0.8 * y[4] + 0.2 * y[5]))
     det = Detections(1.0, y[:, :2].copy(), y[:, 2].copy())
-    P = np.diag(np.repeat([np.radians(0.2) ** 2, 2.5e-7, 1e-6, 1e-4, 1e-2], 3))
+    P = np.diag(np.repeat([np.radians(0.2) ** 2, 2.5e-7, 1e-6, 1e-4], 3))
     args = compiled.frame_constants(tracker.model, obs, cfg.ukf, cfg.facing_cos,
                                     tracker.assoc_params)  # fmt: skip
     dt = 1 / 30

@@ -55,35 +55,35 @@ def test_the_offset_stays_put_and_the_rest_moves_as_the_sliding_model():
                             s=[1e-3, -4e-4], o=[1.2, -0.7])
     X, noise = np.repeat(x[None], 3, 0), rng.normal(size=(3, model.noise_dim)) * 0.01
     out = model.propagate(X, noise, 0.03)
-    np.testing.assert_array_equal(out[:, :23], sliding.propagate(X[:, :23], noise[:, :11], 0.03))
-    np.testing.assert_allclose(out[:, 23:], X[:, 23:] + noise[:, 11:])
-    np.testing.assert_array_equal(model.depth_offset(out), out[:, 23:])
+    np.testing.assert_array_equal(out[:, :20], sliding.propagate(X[:, :20], noise[:, :8], 0.03))
+    np.testing.assert_allclose(out[:, 20:], X[:, 20:] + noise[:, 8:])
+    np.testing.assert_array_equal(model.depth_offset(out), out[:, 20:])
     Q = model.process_noise(0.03)
-    np.testing.assert_array_equal(Q[:11, :11], sliding.process_noise(0.03))
-    np.testing.assert_allclose(np.diag(Q)[11:], OFFSET_DRIFT * 0.03)
+    np.testing.assert_array_equal(Q[:8, :8], sliding.process_noise(0.03))
+    np.testing.assert_allclose(np.diag(Q)[8:], OFFSET_DRIFT * 0.03)
     P = model.initial_covariance(np.eye(6) * 1e-4)
-    np.testing.assert_array_equal(P[:17, :17], sliding.initial_covariance(np.eye(6) * 1e-4))
-    np.testing.assert_allclose(P[17:, 17:], np.eye(2) * REGISTRATION_PX**2)
-    assert not P[17:, :17].any()
+    np.testing.assert_array_equal(P[:14, :14], sliding.initial_covariance(np.eye(6) * 1e-4))
+    np.testing.assert_allclose(P[14:, 14:], np.eye(2) * REGISTRATION_PX**2)
+    assert not P[14:, :14].any()
 
 
 def test_a_fresh_fit_takes_the_offset_of_the_track_before():
     model = DepthOffsetModel()
     x = model.initial_state(np.eye(3), np.zeros(3))
-    P = np.full((19, 19), 1e-6) + np.eye(19) * 1e-4
+    P = np.full((16, 16), 1e-6) + np.eye(16) * 1e-4
     before_x = x.copy()
-    before_x[23:] = [1.8, -0.9]
-    before_P = np.eye(19) * 2e-4
-    before_P[17:, 17:] = [[0.04, 0.01], [0.01, 0.05]]
+    before_x[20:] = [1.8, -0.9]
+    before_P = np.eye(16) * 2e-4
+    before_P[14:, 14:] = [[0.04, 0.01], [0.01, 0.05]]
     x1, P1 = carry_offset(model, x, P, before_x, before_P)
-    np.testing.assert_array_equal(x1[23:], [1.8, -0.9])
-    np.testing.assert_array_equal(x1[:23], x[:23])
-    np.testing.assert_array_equal(P1[17:, 17:], before_P[17:, 17:])
-    assert not P1[17:, :17].any() and not P1[:17, 17:].any()
-    np.testing.assert_array_equal(P1[:17, :17], P[:17, :17])
+    np.testing.assert_array_equal(x1[20:], [1.8, -0.9])
+    np.testing.assert_array_equal(x1[:20], x[:20])
+    np.testing.assert_array_equal(P1[14:, 14:], before_P[14:, 14:])
+    assert not P1[14:, :14].any() and not P1[:14, 14:].any()
+    np.testing.assert_array_equal(P1[:14, :14], P[:14, :14])
     # nothing to carry: no track before, or a model without the offset
     assert carry_offset(model, x, P, None, None)[0] is x
-    assert carry_offset(SlidingSkinModel(), x[:23], P[:17, :17], before_x, before_P)[0] is not None
+    assert carry_offset(SlidingSkinModel(), x[:20], P[:14, :14], before_x, before_P)[0] is not None
 
 
 def test_the_estimate_reported_is_the_states_offset_and_its_sigma():
@@ -91,14 +91,14 @@ def test_the_estimate_reported_is_the_states_offset_and_its_sigma():
     nothing for a model without the offset or before any track."""
     model = DepthOffsetModel()
     x = model.initial_state(np.eye(3), np.zeros(3), o=[1.25, -0.5])
-    P = np.eye(19) * 1e-4
-    P[17:, 17:] = [[0.09, 0.02], [0.02, 0.16]]
+    P = np.eye(16) * 1e-4
+    P[14:, 14:] = [[0.09, 0.02], [0.02, 0.16]]
     got = registration_estimate(model, x, P)
     assert (got["du_px"], got["dv_px"]) == (1.25, -0.5)
     np.testing.assert_allclose(got["sd_px"], [0.3, 0.4])
     assert got["prior_sd_px"] == REGISTRATION_PX
     assert registration_estimate(model, None, None) is None
-    assert registration_estimate(SlidingSkinModel(), x[:23], P[:17, :17]) is None
+    assert registration_estimate(SlidingSkinModel(), x[:20], P[:14, :14]) is None
 
 
 def test_a_new_hand_frame_turns_the_slide_and_leaves_the_offset():
@@ -112,13 +112,13 @@ def test_a_new_hand_frame_turns_the_slide_and_leaves_the_offset():
     model = DepthOffsetModel()
     x = model.initial_state(np.eye(3), rng.normal(scale=0.02, size=3), s=[1e-3, 5e-4],
                             o=[1.5, -0.5])
-    P = np.diag(rng.uniform(1e-6, 1e-4, 19))
+    P = np.diag(rng.uniform(1e-6, 1e-4, 16))
     xn, Pn, *_ = reanchor(x, P, np.eye(3), np.array([0.0, 0.0, 0.6]), old, new, None, 2)
     T_R = fit_pose(old, new.points)[0]
-    np.testing.assert_allclose(xn[21:23], T_R.T[:2, :2] @ x[21:23], atol=1e-15)
-    np.testing.assert_array_equal(xn[23:], x[23:])
-    np.testing.assert_allclose(Pn[17:, 17:], P[17:, 17:], atol=1e-20)
-    assert np.allclose(Pn[17:, :17], 0.0)
+    np.testing.assert_allclose(xn[18:20], T_R.T[:2, :2] @ x[18:20], atol=1e-15)
+    np.testing.assert_array_equal(xn[20:], x[20:])
+    np.testing.assert_allclose(Pn[14:, 14:], P[14:, 14:], atol=1e-20)
+    assert np.allclose(Pn[14:, :14], 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -152,16 +152,16 @@ def test_the_tracker_finds_the_rendered_misregistration_and_keeps_it(misregister
         results = [tracker.step(d) for d in detections[:120]]
         errors.append(score(results, truth)["pos"])  # (the truth of the frames tracked)
     assert isinstance(tracker.model, DepthOffsetModel)
-    found, sd = tracker._track.x[23:], np.sqrt(np.diag(tracker._track.P)[17:])
+    found, sd = tracker._track.x[20:], np.sqrt(np.diag(tracker._track.P)[14:])
     np.testing.assert_allclose(found, offset, atol=0.35)
     assert np.all(sd < 0.4)
     assert errors[1] < 0.67 * errors[0], errors
     # 20 frames missing (0.67 s, past max_gap): lost, then fitted afresh on the next frame
-    P_before = tracker._track.P[17:, 17:].copy()
+    P_before = tracker._track.P[14:, 14:].copy()
     again = tracker.step(detections[140])
     assert again.has_estimate and tracker._initialisations == 2
-    np.testing.assert_array_equal(tracker._track.x[23:], found)
-    np.testing.assert_array_equal(tracker._track.P[17:, 17:], P_before)
+    np.testing.assert_array_equal(tracker._track.x[20:], found)
+    np.testing.assert_array_equal(tracker._track.P[14:, 14:], P_before)
 
 
 def test_track_reports_the_offset_found_in_its_summary_and_report(misregistered, tmp_path):

@@ -37,20 +37,20 @@ def test_the_slide_is_predicted_as_an_ornstein_uhlenbeck_process():
     R = Rotation.from_rotvec([0.3, -0.2, 0.1]).as_matrix()
     x = model.initial_state(R, np.zeros(3), w=np.array([0.5, 0.0, 0.2]),
                             s=np.array([0.002, -0.0005]))
-    assert x.size == 23 and model.dim == 17 and model.noise_dim == 11
-    P = np.eye(17) * 1e-8
-    P[15:, 15:] = np.diag([4e-7, 1e-7])
-    xi = np.random.default_rng(0).normal(scale=1e-3, size=(5, 17))
+    assert x.size == 20 and model.dim == 14 and model.noise_dim == 8
+    P = np.eye(14) * 1e-8
+    P[12:, 12:] = np.diag([4e-7, 1e-7])
+    xi = np.random.default_rng(0).normal(scale=1e-3, size=(5, 14))
     np.testing.assert_allclose(model.lift(x, model.retract(x, xi)), xi, atol=1e-12)
     dt, steps = 1 / 30, 45
-    x0_slide, P0 = x[21:].copy(), np.diag(P)[15:].copy()
+    x0_slide, P0 = x[18:].copy(), np.diag(P)[12:].copy()
     for _ in range(steps):
         x, P = ukf.predict(model, x, P, dt, model.process_noise(dt))
     keep = math.exp(-dt * steps / 2.0)
-    np.testing.assert_allclose(x[21:], keep * x0_slide, rtol=1e-9)
+    np.testing.assert_allclose(x[18:], keep * x0_slide, rtol=1e-9)
     expected = keep**2 * P0 + (1 - keep**2) * 0.5 * np.array([0.0015, 0.0005]) ** 2
-    np.testing.assert_allclose(np.diag(P)[15:], expected, rtol=1e-6)
-    np.testing.assert_allclose(P[15:, :15], 0.0, atol=1e-18)  # nothing couples them yet
+    np.testing.assert_allclose(np.diag(P)[12:], expected, rtol=1e-6)
+    np.testing.assert_allclose(P[12:, :12], 0.0, atol=1e-18)  # nothing couples them yet
 
 
 def test_the_observation_moves_the_mcp_markers_by_the_slide():
@@ -89,7 +89,7 @@ def test_reanchor_keeps_the_slid_markers_where_they_are():
     x = SlidingSkinModel.initial_state(R, rng.normal(scale=0.05, size=3),
                                        rng.normal(scale=0.1, size=3), rng.normal(size=3),
                                        slide[:2])
-    P = np.diag(rng.uniform(1e-6, 1e-4, 17))
+    P = np.diag(rng.uniform(1e-6, 1e-4, 14))
     T_R, T_t = fit_pose(old, new.points)
     turned = T_R.T @ slide  # the slide in the new hand frame
     assert abs(turned[2]) > 1e-6  # the frames differ: some of it is dropped
@@ -101,10 +101,10 @@ def test_reanchor_keeps_the_slid_markers_where_they_are():
     for w0 in (None, (W, t_c0 + [0.001, 0.0, -0.002], np.eye(6) * 1e-6)):
         xn, Pn, R_c0n, t_c0n, _ = reanchor(x, P, R_c0, t_c0, old, new, w0)
         R_chn, t_chn = R_c0n @ xn[:9].reshape(3, 3), R_c0n @ xn[9:12] + t_c0n
-        np.testing.assert_allclose(xn[21:], turned[:2], atol=1e-15)
+        np.testing.assert_allclose(xn[18:], turned[:2], atol=1e-15)
         np.testing.assert_allclose(
-            (new.points[mcp] + [*xn[21:], 0.0]) @ R_chn.T + t_chn, before, atol=1e-12)
-        np.testing.assert_allclose(Pn[15:, 15:], T_R.T[:2, :2] @ P[15:, 15:] @ T_R[:2, :2],
+            (new.points[mcp] + [*xn[18:], 0.0]) @ R_chn.T + t_chn, before, atol=1e-12)
+        np.testing.assert_allclose(Pn[12:, 12:], T_R.T[:2, :2] @ P[12:, 12:] @ T_R[:2, :2],
                                    atol=1e-18)
         assert np.allclose(Pn, Pn.T) and np.all(np.linalg.eigvalsh(Pn) > 0)
 
@@ -114,7 +114,7 @@ def _slide_run(frames, camera, layout, **kw):
     slides = []
     for f in frames:
         result = tracker.step(f.detections)
-        slides.append(result.x[21:23] if result.has_estimate else np.full(2, np.nan))
+        slides.append(result.x[18:20] if result.has_estimate else np.full(2, np.nan))
     return tracker, np.array(slides)
 
 
@@ -156,8 +156,8 @@ def test_a_fresh_fit_starts_the_slide_narrow_and_the_option_asks_for_the_model()
     model.slide_scale = 0.25
     pose = np.diag([1e-4] * 3 + [1e-6] * 3)
     P = model.initial_covariance(pose)
-    np.testing.assert_allclose(P[:15, :15], ConstantRateModel().initial_covariance(pose))
-    np.testing.assert_allclose(np.diag(P)[15:],
+    np.testing.assert_allclose(P[:12, :12], ConstantRateModel().initial_covariance(pose))
+    np.testing.assert_allclose(np.diag(P)[12:],
                                0.25 * INITIAL_SHARE**2 * np.array([0.002, 0.001]) ** 2)
     parser = argparse.ArgumentParser()
     add_tracker_options(parser)

@@ -86,7 +86,7 @@ def test_filter_is_consistent_nees_and_nis_in_chi_square_bands():
     nees = np.zeros((runs, steps))
     nis = np.zeros((runs, steps))
     x0 = ConstantRateModel.initial_state(np.eye(3), np.zeros(3))
-    P0 = np.diag(np.repeat([1e-4, 1e-6, 1e-4, 1e-2, 1.0], 3))
+    P0 = np.diag(np.repeat([1e-4, 1e-6, 1e-4, 1e-2], 3))
     Q = model.process_noise(dt)
     for r in range(runs):
         states = _model_matched_truth(model, x0, P0, Q, dt, steps, obs, camera, rng)
@@ -102,13 +102,11 @@ def test_filter_is_consistent_nees_and_nis_in_chi_square_bands():
             e = model.lift(x, truth[None])[0]
             nees[r, k] = e @ np.linalg.solve(P, e)
             nis[r, k] = res.nis
-    for values, dof in ((nees, model.dim), (nis, 18)):
+    for values, dof in ((nees, 12), (nis, 18)):
         lo, hi = chi2.ppf([0.025, 0.975], runs * dof) / runs
         mean = values.mean(axis=0)
         inside = np.mean((mean >= lo) & (mean <= hi))
-        # each step's mean is outside its 95 % band 1 time in 20: a consistent filter has 5 or
-        # more of 40 steps outside 5 % of the time (binomial; NEES and NIS: 10 %), 7 or more 0.3 %
-        assert inside >= 0.85, (dof, lo, hi, mean.round(2))
+        assert inside >= 0.9, (dof, lo, hi, mean.round(2))
         # and over all steps together (a much tighter band)
         lo_all, hi_all = chi2.ppf([0.025, 0.975], runs * steps * dof) / (runs * steps)
         assert lo_all <= values.mean() <= hi_all, (dof, values.mean(), lo_all, hi_all)
@@ -118,10 +116,10 @@ def _model_matched_truth(model, x0, P0, Q, dt, steps, obs, camera, rng):
     """States driven by the model's own noise; a draw whose hand leaves the field of view (the
     random walk is unbounded) is drawn again, since there is nothing to measure there."""
     while True:
-        truth = model.retract(x0, rng.multivariate_normal(np.zeros(model.dim), P0)[None])[0]
+        truth = model.retract(x0, rng.multivariate_normal(np.zeros(12), P0)[None])[0]
         states = []
         for _ in range(steps):
-            noise = rng.multivariate_normal(np.zeros(model.noise_dim), Q)[None]
+            noise = rng.multivariate_normal(np.zeros(6), Q)[None]
             truth = model.propagate(truth[None], noise, dt)[0]
             states.append(truth)
         pts = obs.marker_points(np.array(states))
@@ -263,4 +261,4 @@ def test_a_fresh_start_mid_reach_is_not_dragged_off_by_its_zero_velocity():
                 res = tracker.step(frames[i].detections)
             errors[reacquire] = np.degrees(rotation_distance(res.R_ch, truth.R_ch[k + 6]))
         assert errors[True] < 2.0
-    assert errors[False] > 10  # k = 69: without re-acquisition the wrong update stays
+    assert errors[False] > 20  # k = 69: without re-acquisition the wrong update stays

@@ -49,11 +49,6 @@ def smooth_run(
     header, rows = read_pose_table(poses_path)
     body = list(rows)  # a last line cut short by an interruption is already dropped
     states = read_states(states_path)
-    if states.P.shape[1] != model.dim:  # written by another version's state model
-        raise InputError(
-            f"{states_path} holds filter states of {states.P.shape[1]} dimensions, this version's "
-            f"model has {model.dim}; track the recording again with --smooth"
-        )
     if len(states.frame) != len(body):
         raise InputError(
             f"{states_path} has {len(states.frame)} frames but poses.csv has {len(body)}; "

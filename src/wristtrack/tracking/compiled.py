@@ -28,8 +28,6 @@ from wristtrack.filter import associate as assoc
 from wristtrack.filter import ukf
 from wristtrack.tracking import kernel, merged
 from wristtrack.tracking.kernel import (
-    _ACC_SIGMA,
-    _ACC_TAU,
     _CX,
     _CY,
     _DEPTH_COEFF,
@@ -103,7 +101,6 @@ def frame_constants(
     par[_DEPTH_OBLIQUE] = noise.depth_oblique
     par[_SQRT_QA] = math.sqrt(process.linear_accel)
     par[_SQRT_QW] = math.sqrt(process.angular_accel)
-    par[_ACC_TAU], par[_ACC_SIGMA] = process.angular_accel_time, process.angular_accel_sigma
     par[_FACING_COS] = facing_cos
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
@@ -224,11 +221,11 @@ def _code_digest(functions: Iterable[types.FunctionType]) -> int:
 def _warm_up_arguments() -> tuple:
     """Arguments of the types the tracker passes (C-contiguous writable float64 arrays, a float
     dt), so the compile done here is the one every frame uses. The values do not matter."""
-    x = np.concatenate((np.eye(3).reshape(9), np.zeros(12)))
+    x = np.concatenate((np.eye(3).reshape(9), np.zeros(9)))
     par = np.ones(_N_PAR)
-    par[_N_OFFSET] = 0.0  # the 15 states of x: no offset
-    return (x, np.eye(15), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros(1), np.zeros((6, 3)),
-            np.zeros((6, 3)), np.zeros(6), np.eye(3), np.ones(3), np.ones(49), np.ones(49),
+    par[_N_OFFSET] = 0.0  # the 12 states of x: no offset
+    return (x, np.eye(12), 0.03, np.zeros((1, 2)), np.ones(1), np.zeros(1), np.zeros((6, 3)),
+            np.zeros((6, 3)), np.zeros(6), np.eye(3), np.ones(3), np.ones(37), np.ones(37),
             par)  # fmt: skip
 
 

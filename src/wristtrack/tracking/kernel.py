@@ -2,13 +2,12 @@
 
 The same filter as the generic path (tracking/generic_step.py, the reference, which reads like
 the paper): augmented UKF prediction with the measurement, one-to-one (GNN) association with a
-chi-square gate and Cholesky correction, for the constant-rate model (its angular acceleration
-a Gauss-Markov state), with or without the skin
+chi-square gate and Cholesky correction, for the constant-rate model, with or without the skin
 slide in the state (tracking/slide_model.py) and the depth map's offset after it
 (tracking/offset_model.py), with pixel + depth measurements (and the noise the markers share:
 skin slide, misregistration) on a camera with or without lens distortion.
-A frame's arrays are tiny (49 sigma points and a 15-D tangent, 57 and 17-D with the slide, 65
-and 19-D with the offset too; 6 markers x 3 measurements), so in NumPy the per-call overhead is
+A frame's arrays are tiny (37 sigma points and a 12-D tangent, 45 and 14-D with the slide, 53
+and 16-D with the offset too; 6 markers x 3 measurements), so in NumPy the per-call overhead is
 nearly all the cost; compiled (tracking/compiled.py), the frame is one call. Equal to the
 generic step to rounding (tests/tracking/test_compiled.py).
 
@@ -47,8 +46,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
     _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _SLIDE_TAU, _DISTORTED,
-    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _ACC_TAU, _ACC_SIGMA, _N_SCALARS,
-) = range(29)  # fmt: skip
+    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _N_SCALARS,
+) = range(27)  # fmt: skip
 _SLIDE_VAR = _N_SCALARS  # the slide's stationary variances (3)
 _DIST = _SLIDE_VAR + 3  # the lens distortion, Camera's (k1, k2, p1, p2, k3, k4, k5, k6)
 _N_PAR = _DIST + 8
@@ -60,16 +59,15 @@ _N_PAR = _DIST + 8
 def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, wc, par):
     """One tracking frame: (code, x, P, labels, markers associated, NIS); see the module.
 
-    x (21,) state [R row-major, p, v, w, alpha] and P (15, 15) its tangent covariance, or with
-    the skin slide in the state (tracking/slide_model.py) x (21 + k,) [..., s] and P (15 + k,
-    15 + k), s
+    x (18,) state [R row-major, p, v, w] and P (12, 12) its tangent covariance, or with the skin
+    slide in the state (tracking/slide_model.py) x (18 + k,) [..., s] and P (12 + k, 12 + k), s
     the slide along the hand's first k axes (observation.STATE_SLIDE_AXES), and the depth offset
     (du, dv) after it where par[_N_OFFSET] is 2 (tracking/offset_model.py); dt the step;
     uv (M, 2) and depth (M,) the blobs (all depths finite), blob_var (M,) the pixel variance
     each blob adds to its marker's in the update (generic_step._blob_variance); layout (J, 3) the
     markers in the hand frame; slide (J, 3) each marker's share in the common skin slide taken
     as noise (MarkerObservation.slide); sliding (J,) 1 for the markers the state's slide moves,
-    else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 49 (+ 4 k
+    else 0; R_c0, t_c0 the camera pose of W0; wm, wc (S,) the unscented weights, S = 37 (+ 4 k
     with the slide, + 8 with the offset) sigma points ordered 0, +columns of L, -columns of L,
     +noise, -noise (the weights of all but the first are equal, so this is ukf.sigma_offsets'
     set); par the constants (``compiled.frame_constants``).
@@ -93,8 +91,8 @@ def step(x, P, dt, uv, depth, blob_var, layout, slide, sliding, R_c0, t_c0, wm, 
     mean = np.empty(m + n)
     C = np.empty((m + n, m + n))
     moments_into(W, wm, wc, mean, C)
-    q = np.empty(4)  # the predicted orientation, pvw its p, v, w, alpha, sl its slide (zeros:
-    pvw = np.empty(12)  # none), ro its depth offset (zeros: none)
+    q = np.empty(4)  # the predicted orientation, pvw its p, v, w, sl its slide (zeros: none),
+    pvw = np.empty(9)  # ro its depth offset (zeros: none)
     sl = np.zeros(3)
     ro = np.zeros(2)
     _predicted(x, dt, mean[m:], qs, qc, par, q, pvw, sl, ro)
@@ -140,10 +138,8 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     J, n, S = layout.shape[0], L.shape[0], W.shape[0]
     m = 3 * J
     n_off = int(par[_N_OFFSET])  # the depth offset's states, after the slide's (n_sl)
-    n_sl = n - 15 - n_off
-    # noise dimensions: linear acceleration (3), the angular acceleration's white share (3) and
-    # its innovation (3), the slide's, the offset's
-    nq = (S - 1) // 2 - n
+    n_sl = n - 12 - n_off
+    nq = (S - 1) // 2 - n  # noise dimensions: accelerations (6), the slide's, the offset's
     s_drift = par[_SQRT_DRIFT] * math.sqrt(dt)  # the offset's drift over dt per unit noise
     ro = np.zeros(2)  # a point's depth offset (px)
     nc = np.empty(3)  # and the hand's normal, camera frame
@@ -158,12 +154,8 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     sa_p = 0.5 * sa_v * dt  # position change: sqrt(q_a / dt) dt^2 / 2
     sw_w = par[_SQRT_QW] * sqdt
     sw_turn = 0.5 * sw_w * dt  # the midpoint rate's share of the turn
-    keep_a = math.exp(-dt / par[_ACC_TAU])  # the angular acceleration's share left after dt
-    sq_a = par[_ACC_SIGMA] * math.sqrt(1.0 - keep_a * keep_a)  # its innovation's sigma
-    half = 0.5 * dt * dt  # a turn's share of the angular acceleration
     quat_of_rotation_into(x, qs)
-    quat_exp_into(x[15] * dt + half * x[18], x[16] * dt + half * x[19],
-                  x[17] * dt + half * x[20], qc)  # the centre turns by (w + alpha dt / 2) dt
+    quat_exp_into(x[15] * dt, x[16] * dt, x[17] * dt, qc)  # the centre turns by w dt
     qc[1:] = -qc[1:]  # conj(q_centre): sigma rotations relative to the centre's
     off = np.empty(n + nq)  # the sigma point's tangent offset and noise offset
     r = np.empty(4)
@@ -185,26 +177,25 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             off[s - 1 - n] = scale
         elif s > 2 * n + nq:
             off[s - 1 - n - nq] = -scale
-        # lifts of p, v, w, alpha (and s): the propagated point minus the propagated centre
-        # (the state cancels)
+        # lifts of p, v, w (and s): the propagated point minus the propagated centre (the
+        # state cancels)
         for i in range(3):
             W[s, m + 3 + i] = off[3 + i] + dt * off[6 + i] + sa_p * off[n + i]
             W[s, m + 6 + i] = off[6 + i] + sa_v * off[n + i]
-            W[s, m + 9 + i] = off[9 + i] + dt * off[12 + i] + sw_w * off[n + 3 + i]
-            W[s, m + 12 + i] = keep_a * off[12 + i] + sq_a * off[n + 6 + i]
+            W[s, m + 9 + i] = off[9 + i] + sw_w * off[n + 3 + i]
         for i in range(n_sl):
-            W[s, m + 15 + i] = keep * off[15 + i] + sq_s[i] * off[n + 9 + i]
-            sp[i] = keep * x[21 + i] + W[s, m + 15 + i]
+            W[s, m + 12 + i] = keep * off[12 + i] + sq_s[i] * off[n + 6 + i]
+            sp[i] = keep * x[18 + i] + W[s, m + 12 + i]
         for i in range(n_off):
-            W[s, m + 15 + n_sl + i] = off[15 + n_sl + i] + s_drift * off[n + 9 + n_sl + i]
-            ro[i] = x[21 + n_sl + i] + W[s, m + 15 + n_sl + i]
+            W[s, m + 12 + n_sl + i] = off[12 + n_sl + i] + s_drift * off[n + 6 + n_sl + i]
+            ro[i] = x[18 + n_sl + i] + W[s, m + 12 + n_sl + i]
         # orientation t r q_state: retraction r = exp(dphi), turn t = exp(dt (w + dw) + the
-        # midpoint share of the angular acceleration, alpha + dalpha and its white share)
+        # midpoint share of the angular acceleration)
         quat_exp_into(off[0], off[1], off[2], r)
         quat_exp_into(
-            dt * (x[15] + off[9]) + half * (x[18] + off[12]) + sw_turn * off[n + 3],
-            dt * (x[16] + off[10]) + half * (x[19] + off[13]) + sw_turn * off[n + 4],
-            dt * (x[17] + off[11]) + half * (x[20] + off[14]) + sw_turn * off[n + 5],
+            dt * (x[15] + off[9]) + sw_turn * off[n + 3],
+            dt * (x[16] + off[10]) + sw_turn * off[n + 4],
+            dt * (x[17] + off[11]) + sw_turn * off[n + 5],
             t,
         )
         quat_mul_into(t, r, tr)
@@ -268,19 +259,17 @@ def _predicted(x, dt, lift, qs, qc, par, q, pvw, sl, ro):
     quat_mul_into(qc, qs, g)
     quat_exp_into(lift[0], lift[1], lift[2], e)
     quat_mul_into(e, g, q)
-    keep_a = math.exp(-dt / par[_ACC_TAU])
     for i in range(3):
         pvw[i] = x[9 + i] + dt * x[12 + i] + lift[3 + i]
         pvw[3 + i] = x[12 + i] + lift[6 + i]
-        pvw[6 + i] = x[15 + i] + dt * x[18 + i] + lift[9 + i]
-        pvw[9 + i] = keep_a * x[18 + i] + lift[12 + i]
+        pvw[6 + i] = x[15 + i] + lift[9 + i]
     keep = math.exp(-dt / par[_SLIDE_TAU])
     n_off = int(par[_N_OFFSET])
-    n_sl = lift.shape[0] - 15 - n_off
+    n_sl = lift.shape[0] - 12 - n_off
     for i in range(n_sl):
-        sl[i] = keep * x[21 + i] + lift[15 + i]
+        sl[i] = keep * x[18 + i] + lift[12 + i]
     for i in range(n_off):
-        ro[i] = x[21 + n_sl + i] + lift[15 + n_sl + i]
+        ro[i] = x[18 + n_sl + i] + lift[12 + n_sl + i]
 
 
 def _camera_pose(q, pvw, R_c0, t_c0, Rc, tc):
@@ -456,19 +445,19 @@ def _correct(C, mean, uv, depth, blob_var, blob_of, n_pairs, q, pvw, sl, ro, P_o
     quat_exp_into(G[0, n], G[1, n], G[2, n], e)
     quat_mul_into(e, q, g)
     q[:] = g
-    for i in range(12):
+    for i in range(9):
         pvw[i] += G[3 + i, n]
     n_off = int(par[_N_OFFSET])
-    for i in range(n - 15 - n_off):
-        sl[i] += G[15 + i, n]
+    for i in range(n - 12 - n_off):
+        sl[i] += G[12 + i, n]
     for i in range(n_off):
         ro[i] += G[n - n_off + i, n]
     return G[n, n]
 
 
 def _write_state(q, pvw, sl, ro, par, out):
-    """out = [R(q / |q|) row-major, p, v, w, alpha] (and the slide s and the depth offset where
-    out has room for them)."""
+    """out = [R(q / |q|) row-major, p, v, w] (and the slide s and the depth offset where out
+    has room for them)."""
     s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for i in range(4):
         q[i] *= s
@@ -477,14 +466,14 @@ def _write_state(q, pvw, sl, ro, par, out):
     for i in range(3):
         for j in range(3):
             out[3 * i + j] = R[i, j]
-    for i in range(12):
+    for i in range(9):
         out[9 + i] = pvw[i]
     n_off = int(par[_N_OFFSET])
-    n_sl = out.shape[0] - 21 - n_off
+    n_sl = out.shape[0] - 18 - n_off
     for i in range(n_sl):
-        out[21 + i] = sl[i]
+        out[18 + i] = sl[i]
     for i in range(n_off):
-        out[21 + n_sl + i] = ro[i]
+        out[18 + n_sl + i] = ro[i]
 
 
 # the functions ``step`` calls, compiled under these names before it (compiled._jit)

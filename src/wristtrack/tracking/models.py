@@ -1,22 +1,8 @@
 """Motion models of the wrist relative to the fixed frame W0, in the form the UKF needs.
 
 ``ConstantRateModel`` (the default): orientation on SO(3) as an error state, position, linear
-velocity, angular velocity and angular acceleration (in W0) in the state; constant linear
-velocity driven by a white acceleration, the angular velocity driven by the angular
-acceleration, a Gauss-Markov (Singer) process, plus a little white noise. The angular velocity
-is estimated, not differentiated.
-
-Why the angular acceleration. A wrist's range-of-motion cycle is a near-sinusoid whose angular
-acceleration peaks at its ends, where the range of motion is read. Driven by white angular
-acceleration alone, a constant-rate filter either lags there (low noise) or follows every
-frame's noise (high noise); the old default, 2.5 (rad/s^2)^2 s, let each frame's depth noise move
-the orientation. With the acceleration in the state the filter follows a smooth acceleration
-and still averages frames. Its settings (ProcessNoise) keep a fast movement as well followed as
-before; the gain is mostly the smoother's. On the simulated scenarios (measurement level,
-3 seeds) the filtered figures are within 2 %, smoothed orientation RMSE 5-10 % lower and the
-smoothed worst range-of-motion error 2-23 % (mix 0.78 -> 0.63 deg). Rendered, every effect at
-once, the right hand making the left hand's movement (10 seeds): worst range-of-motion error
-1.54 -> 1.51 deg, smoothed 0.86 -> 0.77; JPEG alone smoothed 0.165 -> 0.142.
+velocity and angular velocity (in W0) in the state; constant linear and angular velocity driven
+by random-walk accelerations. The angular velocity is estimated, not differentiated.
 
 ``PaperModel``: the paper's model, state (T, v, Z-Y-Z Euler angles); translation constant
 velocity with random-walk acceleration, orientation a random walk driven by angular-velocity
@@ -31,7 +17,6 @@ this is its reference.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,38 +41,23 @@ class ProcessNoise:
     # Tuned on the simulated scenarios (smooth range-of-motion cycles and reaches): lower values
     # trade lag in fast motion for less noise at rest; see docs/BENCHMARKS.md.
     linear_accel: float = 0.1  # (m/s^2)^2 s, random-walk linear acceleration
-    # default model: the white share of the angular acceleration, (rad/s^2)^2 s (2.5 without the
-    # acceleration state), and the angular acceleration's Gauss-Markov process: its stationary
-    # sigma (rad/s^2) and correlation time (s). A natural-speed range-of-motion cycle peaks at
-    # 1-5 rad/s^2, a fast one (+-50 deg at 1.5 Hz) near 80. 3 rad/s^2 over 0.3 s did best at
-    # natural speed (rendered every effect, right hands making the left hand's movement, 10
-    # seeds: smoothed range-of-motion error 0.69 deg against 0.77 here) but its smoother took a
-    # fast movement's reversals for overshoots (a rendered flexion at 470 deg/s: 0.70 deg
-    # filtered, 1.40 smoothed, against 0.50 and 0.29 here, and 0.51 and 0.30 without the
-    # acceleration state); 10-20 rad/s^2 were robust there and noisier at natural speed.
-    angular_accel: float = 0.3
-    angular_accel_sigma: float = 5.0
-    angular_accel_time: float = 0.1
+    angular_accel: float = 2.5  # (rad/s^2)^2 s, default model: random-walk angular acceleration
     angular_rate: float = 0.5  # (rad/s)^2 s, paper model: random-walk orientation
 
 
 class ConstantRateModel:
-    """State x = [R (9, row-major), p (3), v (3), w (3), alpha (3)]; tangent [dphi, dp, dv, dw,
-    dalpha] (15).
+    """State x = [R (9, row-major), p (3), v (3), w (3)]; tangent [dphi, dp, dv, dw] (12).
 
-    The rotation error is on the left, R = exp(dphi) R_hat, so dphi is in W0 like w and alpha.
-    Noise (9) = (linear acceleration, the angular acceleration's white share, the angular
-    acceleration's innovation).
+    The rotation error is on the left, R = exp(dphi) R_hat, so dphi is in W0 like w.
+    Noise (6) = (linear acceleration, angular acceleration).
     """
 
-    dim = 15
+    dim = 12
     rotation = slice(0, 3)  # tangent coordinates of the orientation error (rad)
     position = slice(3, 6)  # and of the position (m)
     velocity = slice(6, 9)  # m/s
     angular_velocity = slice(9, 12)  # rad/s
-    angular_acceleration = slice(12, 15)  # rad/s^2
-    noise_dim = 9
-    state_size = 21  # x's length; a subclass's extra states follow
+    noise_dim = 6
     name = "default"
 
     def __init__(self, noise: ProcessNoise = ProcessNoise()):
@@ -97,8 +67,7 @@ class ConstantRateModel:
     def initial_state(R: np.ndarray, p: np.ndarray, v=None, w=None) -> np.ndarray:
         zero = np.zeros(3)
         return np.concatenate(
-            (np.asarray(R).reshape(9), p, zero if v is None else v, zero if w is None else w,
-             zero)
+            (np.asarray(R).reshape(9), p, zero if v is None else v, zero if w is None else w)
         )
 
     # retract and lift as written hold for any Euclidean coordinates after w (a subclass's
@@ -119,29 +88,22 @@ class ConstantRateModel:
         return out
 
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
-        a, white, innovation = noise[:, :3], noise[:, 3:6], noise[:, 6:9]
-        p, v, w, alpha = X[:, 9:12], X[:, 12:15], X[:, 15:18], X[:, 18:21]
+        a, alpha = noise[:, :3], noise[:, 3:]
+        p, v, w = X[:, 9:12], X[:, 12:15], X[:, 15:18]
         out = np.empty_like(X)
         out[:, 9:12] = p + v * dt + (0.5 * dt * dt) * a
         out[:, 12:15] = v + a * dt
-        accel = alpha + white  # the angular acceleration over dt
-        out[:, 15:18] = w + accel * dt
-        out[:, 18:21] = self.acceleration_keep(dt) * alpha + innovation
+        out[:, 15:18] = w + alpha * dt
         # exact integration of a constant angular acceleration over dt would need a series; the
         # midpoint rate is second-order accurate, like the position update
-        turn = so3_exp((w + (0.5 * dt) * accel) * dt)
+        turn = so3_exp((w + (0.5 * dt) * alpha) * dt)
         out[:, :9] = (turn @ X[:, :9].reshape(-1, 3, 3)).reshape(-1, 9)
         return out
 
-    def acceleration_keep(self, dt: float) -> float:
-        """The angular acceleration's share left after dt (its Gauss-Markov decay)."""
-        return math.exp(-dt / self.noise.angular_accel_time)
-
     def process_noise(self, dt: float) -> np.ndarray:
-        keep = self.acceleration_keep(dt)
-        innovation = self.noise.angular_accel_sigma**2 * (1.0 - keep * keep)
-        return np.diag(np.repeat([self.noise.linear_accel / dt, self.noise.angular_accel / dt,
-                                  innovation], 3))
+        return np.diag(
+            np.repeat([self.noise.linear_accel / dt, self.noise.angular_accel / dt], 3)
+        )
 
     @staticmethod
     def pose(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,13 +116,11 @@ class ConstantRateModel:
     def initial_covariance(
         self, pose_cov: np.ndarray, v_sigma: float = 0.05, w_sigma: float = 0.3
     ) -> np.ndarray:
-        """Covariance over the tangent from a (6,6) pose covariance (dphi, dp) in W0; the
-        angular acceleration at its stationary sigma."""
-        P = np.zeros((self.dim, self.dim))
+        """Covariance over the tangent from a (6,6) pose covariance (dphi, dp) in W0."""
+        P = np.zeros((12, 12))
         P[:6, :6] = pose_cov
         P[6:9, 6:9] = np.eye(3) * v_sigma**2
-        P[9:12, 9:12] = np.eye(3) * w_sigma**2
-        P[12:15, 12:15] = np.eye(3) * self.noise.angular_accel_sigma**2
+        P[9:, 9:] = np.eye(3) * w_sigma**2
         return P
 
 

@@ -214,8 +214,8 @@ def reanchor(
     w0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     slide_dims: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The default model's state (x (21,), P (15,15); or with the skin slide, (23,), (17,17);
-    and the depth offset, (25,), (19,19)) and W0 re-expressed for layout ``new``. The slide
+    """The default model's state (x (18,), P (12,12); or with the skin slide, (20,), (14,14);
+    and the depth offset, (22,), (16,16)) and W0 re-expressed for layout ``new``. The slide
     along the hand's first ``slide_dims`` axes turns with the hand frame (None: every state
     after w is slide); the states after it (the depth offset: the camera's) do not change.
 
@@ -228,23 +228,23 @@ def reanchor(
     """
     T_R, T_t = fit_pose(old, new.points)
     R, p = x[:9].reshape(3, 3), x[9:12]
-    v, w, alpha = x[12:15], x[15:18], x[18:21]
+    v, w = x[12:15], x[15:18]
     # hand -> camera in the new frame, then relative to the moved W0
     R_c0n, t_c0n = R_c0 @ T_R, t_c0 + R_c0 @ T_t
     Rn = T_R.T @ R @ T_R
     arm = R @ T_t  # the new origin's offset from the old one, in W0
     pn = T_R.T @ (p + arm - T_t)
     vn = T_R.T @ (v + np.cross(w, arm))
-    wn, alpha_n = T_R.T @ w, T_R.T @ alpha
+    wn = T_R.T @ w
     # with the skin slide, k states: the slide along the hand's first k axes
     # (observation.STATE_SLIDE_AXES), which W0 does not turn; its share along the others is
     # noise, not state, and is dropped
     n = P.shape[0]
-    k = n - 15 if slide_dims is None else slide_dims
+    k = n - 12 if slide_dims is None else slide_dims
     J = np.eye(n)
-    for i in range(5):
+    for i in range(4):
         J[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = T_R.T
-    J[15 : 15 + k, 15 : 15 + k] = T_R.T[:k, :k]
+    J[12 : 12 + k, 12 : 12 + k] = T_R.T[:k, :k]
     J[3:6, 0:3] = -T_R.T @ skew(arm)  # a turn of the hand moves the new origin
     Pn = J @ P @ J.T
     w0_cov = np.zeros((6, 6))
@@ -255,13 +255,12 @@ def reanchor(
         R_ch, t_ch = R_c0n @ Rn, R_c0n @ pn + t_c0n
         Q = R_w.T @ R_c0n
         Rn, pn = R_w.T @ R_ch, R_w.T @ (t_ch - t_w)
-        vn, wn, alpha_n = Q @ vn, Q @ wn, Q @ alpha_n
+        vn, wn = Q @ vn, Q @ wn
         M = np.eye(n)
-        M[:15, :15] = np.kron(np.eye(5), Q)
+        M[:12, :12] = np.kron(np.eye(4), Q)
         Pn = M @ Pn @ M.T
         rot = np.kron(np.eye(2), R_w.T)  # camera-frame perturbations into W0 axes
         w0_cov = rot @ cov_w @ rot.T
         R_c0n, t_c0n = R_w, t_w
-    xn = np.concatenate((Rn.reshape(9), pn, vn, wn, alpha_n, T_R.T[:k, :k] @ x[21 : 21 + k],
-                         x[21 + k :]))
+    xn = np.concatenate((Rn.reshape(9), pn, vn, wn, T_R.T[:k, :k] @ x[18 : 18 + k], x[18 + k :]))
     return xn, 0.5 * (Pn + Pn.T), R_c0n, t_c0n, w0_cov

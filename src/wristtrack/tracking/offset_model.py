@@ -50,15 +50,15 @@ OFFSET_DRIFT = 1e-4
 
 
 class DepthOffsetModel(SlidingSkinModel):
-    """State x = [R (9), p, v, w, alpha, s (2), o (2)]; tangent [dphi, dp, dv, dw, dalpha, ds,
-    do] (19): the sliding-skin model and the depth map's offset ``o`` from the colour image (du,
-    dv, px). Noise (13) = (the sliding-skin model's, the offset's drift)."""
+    """State x = [R (9), p, v, w, s (2), o (2)]; tangent [dphi, dp, dv, dw, ds, do] (16): the
+    sliding-skin model and the depth map's offset ``o`` from the colour image (du, dv, px).
+    Noise (10) = (linear acceleration, angular acceleration, the slide's innovation, the
+    offset's drift)."""
 
     dim = SlidingSkinModel.dim + 2
     noise_dim = SlidingSkinModel.noise_dim + 2
     offset = slice(SlidingSkinModel.dim, SlidingSkinModel.dim + 2)  # tangent coordinates (px)
-    state_size = SlidingSkinModel.state_size + 2
-    _state = slice(SlidingSkinModel.state_size, state_size)  # where x holds it
+    _state = slice(6 + SlidingSkinModel.dim, 8 + SlidingSkinModel.dim)  # where x holds it
 
     def __init__(self, *args, prior_px: float = REGISTRATION_PX,
                  drift: float = OFFSET_DRIFT, **kw):

@@ -44,20 +44,15 @@ INITIAL_SHARE = 0.1
 _AXES = len(STATE_SLIDE_AXES)
 
 
-_BASE = ConstantRateModel.state_size  # where x holds the slide
-_BASE_DIM, _BASE_NOISE = ConstantRateModel.dim, ConstantRateModel.noise_dim
-
-
 class SlidingSkinModel(ConstantRateModel):
-    """State x = [R (9), p, v, w, alpha, s (2)]; tangent [dphi, dp, dv, dw, dalpha, ds] (17):
-    the constant-rate model and the MCP markers' common skin slide ``s`` along the hand's
-    STATE_SLIDE_AXES (distal, lateral; m). Noise (11) = (the constant-rate model's, the slide's
-    innovation)."""
+    """State x = [R (9), p, v, w, s (2)]; tangent [dphi, dp, dv, dw, ds] (14): the
+    constant-rate model and the MCP markers' common skin slide ``s`` along the hand's
+    STATE_SLIDE_AXES (distal, lateral; m). Noise (8) = (linear acceleration, angular
+    acceleration, the slide's innovation)."""
 
-    dim = _BASE_DIM + _AXES
-    noise_dim = _BASE_NOISE + _AXES
-    slide = slice(_BASE_DIM, _BASE_DIM + _AXES)  # tangent coordinates of the slide (m)
-    state_size = _BASE + _AXES
+    dim = 12 + _AXES
+    noise_dim = 6 + _AXES
+    slide = slice(12, 12 + _AXES)  # tangent coordinates of the slide (m)
     name = "default"
 
     def __init__(self, noise: ProcessNoise | None = None,
@@ -80,32 +75,31 @@ class SlidingSkinModel(ConstantRateModel):
 
     def propagate(self, X: np.ndarray, noise: np.ndarray, dt: float) -> np.ndarray:
         out = np.empty_like(X)
-        out[:, :_BASE] = super().propagate(X[:, :_BASE], noise[:, :_BASE_NOISE], dt)
-        s = slice(_BASE, _BASE + _AXES)
-        out[:, s] = (math.exp(-dt / self.time_constant) * X[:, s]
-                     + noise[:, _BASE_NOISE:_BASE_NOISE + _AXES])
+        out[:, :18] = super().propagate(X[:, :18], noise[:, :6], dt)
+        s = slice(18, 18 + _AXES)
+        out[:, s] = math.exp(-dt / self.time_constant) * X[:, s] + noise[:, 6:6 + _AXES]
         return out
 
     def process_noise(self, dt: float) -> np.ndarray:
         Q = np.zeros((self.noise_dim, self.noise_dim))
-        Q[:_BASE_NOISE, :_BASE_NOISE] = super().process_noise(dt)
+        Q[:6, :6] = super().process_noise(dt)
         keep = math.exp(-dt / self.time_constant)
-        slide = slice(_BASE_NOISE, _BASE_NOISE + _AXES)
-        Q[slide, slide] = np.diag(self.stationary_variance * (1.0 - keep * keep))
+        Q[6:6 + _AXES, 6:6 + _AXES] = np.diag(self.stationary_variance * (1.0 - keep * keep))
         return Q
 
     @staticmethod
     def skin_slide(X: np.ndarray) -> np.ndarray:
-        """(S, 3) the slide (hand frame X, Y, Z) of states X (S, state_size), zero along the
+        """(S, 3) the slide (hand frame X, Y, Z) of states X (S, 18 + axes), zero along the
         axes the state does not carry."""
         out = np.zeros((X.shape[0], 3))
-        out[:, list(STATE_SLIDE_AXES)] = X[:, _BASE:_BASE + _AXES]
+        out[:, list(STATE_SLIDE_AXES)] = X[:, 18:18 + _AXES]
         return out
 
     def initial_covariance(self, pose_cov: np.ndarray, v_sigma: float = 0.05,
                            w_sigma: float = 0.3) -> np.ndarray:
         """Covariance over the tangent from a (6,6) pose covariance; the slide at
         INITIAL_SHARE of its stationary sigmas."""
-        P = super().initial_covariance(pose_cov, v_sigma, w_sigma)  # (self.dim, self.dim)
+        P = np.zeros((self.dim, self.dim))
+        P[:12, :12] = super().initial_covariance(pose_cov, v_sigma, w_sigma)
         P[self.slide, self.slide] = np.diag(self.stationary_variance) * INITIAL_SHARE**2
         return P
