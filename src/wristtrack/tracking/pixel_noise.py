@@ -142,10 +142,11 @@ class BlobSpread:
     its smeared blobs at the sharp ones' sigma. Rendered reaches under a 1/30 s shutter
     (5 seeds): orientation RMSE 0.330 -> 0.254 deg, worst range-of-motion error 2.49 -> 1.48
     (smoothed 1.29 -> 0.99); the robustness conditions, whose movements show their blur, within
-    0.002 deg. Half of a 1/30 s shutter's gain is still out of reach: the fit residuals this
-    learns from leave out the share of the blur all markers take alike (one direction of
-    motion), and the slow frames at the start of a movement, truly sharp, take b below the
-    prior before the fast ones come."""
+    0.002 deg. Half of a 1/30 s shutter's gain is still out of reach (a prior held for good did
+    0.198 deg, 0.81). Two likely reasons, not measured apart: the fit residuals this learns from
+    leave out the share of the blur all markers take alike (one direction of motion), and the
+    slow frames at the start of a movement, truly sharp, take b below the prior before the fast
+    ones come."""
 
     def __init__(self) -> None:
         # forgetting sums of d/v^2, d s^2/v^2, d s^4/v^2, E/v^2, E s^2/v^2
