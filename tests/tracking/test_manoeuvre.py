@@ -18,6 +18,7 @@ from wristtrack.sim.detections import acceptance_noise, simulate_detections
 from wristtrack.sim.motion import sample, scenario, scenario_motion, timestamps
 from wristtrack.sim.scenario_run import score_run
 from wristtrack.sim.scenes import time_scaled
+from wristtrack.tracking import retries
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
 SPEED_UP = 3.2  # the reach scenario (peak 0.47 m/s) played this much faster: peak ~1.5 m/s
@@ -67,19 +68,19 @@ def test_without_the_manoeuvre_retry_the_fast_reach_is_lost():
 
 
 def test_compiled_path_and_generic_path_agree_on_manoeuvre_frames(monkeypatch):
-    """The retry lives in Tracker._track_frame, shared by both paths: same results (to
-    rounding, relative to the size of the pose)."""
-    retries = []
-    retry = Tracker._manoeuvre_retry
+    """The retries (tracking/retries.py) sit above both paths: same results (to rounding,
+    relative to the size of the pose)."""
+    taken = []
+    retried = retries.retried
 
-    def counted(self, det, track, dt, out):
-        new = retry(self, det, track, dt, out)
-        retries.append(new is not out)
+    def counted(tracker, det, track, dt, out):
+        new = retried(tracker, det, track, dt, out)
+        taken.append(new is not out)
         return new
 
-    monkeypatch.setattr(Tracker, "_manoeuvre_retry", counted)
+    monkeypatch.setattr(retries, "retried", counted)
     fast = _fast_reach(1, TrackerConfig())
-    assert sum(retries) >= 1  # some frames were taken by the retry
+    assert sum(taken) >= 1  # some frames were taken by a retry
     monkeypatch.setattr(Tracker, "_compiled_frame", lambda self, det, track, dt: None)
     generic = _fast_reach(1, TrackerConfig())
     for a, b in zip(fast.results, generic.results, strict=True):

@@ -339,11 +339,42 @@ def test_the_frames_take_the_blur_over_from_its_prior(factor):
         assert got_b == pytest.approx(b, rel=0.2)
 
 
+def test_slow_frames_leave_the_faster_speeds_to_a_long_shutter():
+    """The first frames of a movement, slow enough (up to 1 px/frame at 30 fps) that a long
+    shutter's fit residuals are as small as at rest, take b well below the prior; their b holds
+    up to their speed, and beyond it a long shutter's blur grows at the prior's rate, as it
+    would if the frames had never moved. A recording whose fast frames showed a b above the
+    prior keeps its own."""
+    rng = np.random.default_rng(3)
+    a = 0.02**2
+    spread = pixel_noise.BlobSpread()
+    spread.add(rng.normal(size=(16, 6, 2)) * np.sqrt(a), np.full(16, 12), np.zeros(16), WINDOW_S)
+    slow2 = np.linspace(0.0, 30.0, 16) ** 2
+    for _ in range(2):
+        spread.add(rng.normal(size=(16, 6, 2)) * np.sqrt(a), np.full(16, 12), slow2, WINDOW_S)
+    b = spread.coefficients[1]
+    assert b < 0.3 * pixel_noise.BLUR_PRIOR  # the slow frames showed no growth
+    assert spread.fastest2 == pytest.approx(30.0**2)
+    fast2 = 270.0**2  # 9 px/frame
+    assert spread.growth(fast2) == pytest.approx(b * fast2)
+    assert spread.growth(fast2, long_shutter=True) == pytest.approx(
+        b * 30.0**2 + pixel_noise.BLUR_PRIOR * (fast2 - 30.0**2))
+    assert spread.growth(20.0**2, long_shutter=True) == spread.growth(20.0**2)  # as learned
+    blurred = pixel_noise.BlobSpread()
+    s2 = np.linspace(1e4, 9e4, 16)
+    for _ in range(4):
+        blurred.add(rng.normal(size=(16, 6, 2)) * np.sqrt(4 * pixel_noise.BLUR_PRIOR * s2)[
+            :, None, None], np.full(16, 12), s2, WINDOW_S)
+    assert blurred.coefficients[1] > pixel_noise.BLUR_PRIOR
+    assert blurred.growth(4 * 9e4, long_shutter=True) == pytest.approx(blurred.growth(4 * 9e4))
+    assert pixel_noise.BlobSpread().growth(fast2, long_shutter=True) == 0.0  # nothing learned
+
+
 def test_the_blur_share_is_taken_at_the_frames_speed_up_to_the_model():
-    assert pixel_noise.motion_variance(1e-7, 0.0, 3.0) == 0.0  # a still frame
-    assert pixel_noise.motion_variance(1e-7, 200.0**2, 3.0) == pytest.approx(
+    assert pixel_noise.motion_variance(0.0, 3.0) == 0.0  # a still frame
+    assert pixel_noise.motion_variance(1e-7 * 200.0**2, 3.0) == pytest.approx(
         MARGIN**2 * 3.0 * 1e-7 * 200.0**2)
-    assert pixel_noise.motion_variance(1e-7, 200.0**2, None) == 0.0  # nothing measured yet
+    assert pixel_noise.motion_variance(1e-7 * 200.0**2, None) == 0.0  # nothing measured yet
     obs, _ = _observation()
     obs.set_pixel_sigma(0.05)
     learned = noise_scale.LearnedNoise()

@@ -5,8 +5,8 @@ path every configuration and frame it declines takes: any state model, the paper
 or JPDA, colour alone. It reads like the paper: the unscented prediction of the state and of
 each marker's measurement, each blob scored against each marker that can be seen, the pairs
 chosen, and one update with all the chosen pairs (a blob where markers merged measuring the
-mean of theirs: tracking/merged.py). The tracker (tracking/tracker.py) decides
-what to do with the result (the manoeuvre retry, the NIS test, the skin's depth update).
+mean of theirs: tracking/merged.py). The tracker (tracking/tracker.py) decides what to do
+with the result (the retries of tracking/retries.py, the NIS test, the skin's depth update).
 """
 
 from __future__ import annotations

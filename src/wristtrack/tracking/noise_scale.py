@@ -224,14 +224,21 @@ class LearnedNoise:
             obs.set_pixel_sigma(self.pixel_sigma)
         obs.motion_variance = self._blur_variance(obs)
 
-    def _blur_variance(self, obs) -> float:
+    def long_shutter_variance(self, obs) -> float | None:
+        """The pixel variance the blur adds at the last frame's image speed if beyond the
+        speeds the blobs' spread was learned at it is a long shutter's
+        (pixel_noise.BlobSpread.growth), up to the model's sigma for ``obs``; None where that
+        is no more than ``obs`` takes."""
+        variance = self._blur_variance(obs, long_shutter=True)
+        return variance if variance > obs.motion_variance else None
+
+    def _blur_variance(self, obs, long_shutter: bool = False) -> float:
         """The pixel variance the blur adds at the last frame's image speed (pixel_noise.
         motion_variance), up to the model's sigma for ``obs``."""
-        coefficients = self.spread.coefficients
-        if coefficients is None or not self.speed2:
+        if not self.speed2:
             return 0.0
-        blur = pixel_noise.motion_variance(coefficients[1], self.speed2, self._inflation())
-        return min(blur, obs.suspect_variance)
+        growth = self.spread.growth(self.speed2, long_shutter)
+        return min(pixel_noise.motion_variance(growth, self._inflation()), obs.suspect_variance)
 
     def _inflation(self) -> float | None:
         """The correlation's inflation as measured, or until it is, the prior's

@@ -51,7 +51,11 @@ takes a (within the bounds below) for every blob, and each frame adds MARGIN^2 x
 b s^2 at the frame's speed (:func:`motion_variance`), up to the model's sigma. With the average
 alone the shutter cost 0.24 -> 0.29 deg; with the speed 0.20. Until the frames have moved, b is
 a long shutter's (``BLUR_PRIOR``): a first movement's blobs are smeared before any frame shows
-it.
+it. The scatter does not grow as s^2 all the way, though: flat to ~2 px/frame, then steeply.
+A movement's first, slow frames take b to about 0 whatever the shutter, and b is evidence only
+up to the fastest frames it was learned from (``BlobSpread.growth``); a faster frame that the
+update then cannot explain is tried again with the prior's growth beyond them
+(tracking/retries.py).
 
 MARGIN: with the sigma fixed, the rendered recordings came out best at about twice the blobs'
 white-noise equivalent (clean and structured light at 0.05 px or below for 0.027, Bayer at 0.1
@@ -142,16 +146,18 @@ class BlobSpread:
     its smeared blobs at the sharp ones' sigma. Rendered reaches under a 1/30 s shutter
     (5 seeds): orientation RMSE 0.330 -> 0.254 deg, worst range-of-motion error 2.49 -> 1.48
     (smoothed 1.29 -> 0.99); the robustness conditions, whose movements show their blur, within
-    0.002 deg. Half of a 1/30 s shutter's gain is still out of reach (a prior held for good did
-    0.198 deg, 0.81). Two likely reasons, not measured apart: the fit residuals this learns from
-    leave out the share of the blur all markers take alike (one direction of motion), and the
-    slow frames at the start of a movement, truly sharp, take b below the prior before the fast
-    ones come."""
+    0.002 deg. The slow frames at the start of a movement, truly sharp, then took b to 0 before
+    the fast ones came (a window at up to 1 px/frame, where a 1/30 s shutter's blobs are as
+    sharp as at rest): hence ``fastest2`` and the long shutter's retry (tracking/retries.py),
+    0.254 -> 0.211 deg, 1.48 -> 1.04 (smoothed 0.99 -> 0.69) on the same reaches."""
 
     def __init__(self) -> None:
         # forgetting sums of d/v^2, d s^2/v^2, d s^4/v^2, E/v^2, E s^2/v^2
         self._sums = np.zeros(5)
         self.coefficients: tuple[float, float] | None = None  # (a, b) so far
+        # the highest squared image speed (px/s)^2 of the frames learned from, forgotten as the
+        # sums are: b is evidence up to it (:meth:`growth`)
+        self.fastest2 = 0.0
 
     def add(self, residuals: np.ndarray, dof: np.ndarray, speed2: np.ndarray,
             span: float) -> None:
@@ -160,6 +166,8 @@ class BlobSpread:
         ``span`` seconds."""
         keep = math.exp(-span / SPREAD_TIME_CONSTANT_S)
         d, s2 = dof.astype(float), np.asarray(speed2, dtype=float)
+        learned = s2[d > 0]
+        self.fastest2 = max(keep * self.fastest2, float(learned.max()) if learned.size else 0.0)
         E = np.nansum(residuals**2, axis=(1, 2))
         known = self.coefficients
         if known is None:  # the first window: its own spread at rest, the prior's growth
@@ -185,6 +193,20 @@ class BlobSpread:
         if a < 0:  # all of it grows with speed
             return 0.0, Es2 / ds4
         return E / d, 0.0
+
+    def growth(self, speed2: float, long_shutter: bool = False) -> float:
+        """The variance (px^2 per coordinate) the blur adds to a blob at squared image speed
+        ``speed2`` (px/s)^2: b s^2 (0 before a frame has shown any). ``long_shutter``: b holds
+        up to the fastest frames it was learned from (``fastest2``), and beyond them the
+        prior's growth where it is the larger, a long shutter's blur that those frames were
+        too slow to show (module doc)."""
+        if self.coefficients is None:
+            return 0.0
+        b = self.coefficients[1]
+        if not long_shutter:
+            return b * speed2
+        seen = min(speed2, self.fastest2)
+        return b * seen + max(b, BLUR_PRIOR) * (speed2 - seen)
 
     @property
     def variance(self) -> float | None:
@@ -279,13 +301,13 @@ def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float, r2: float) -
     return speed2 if math.isfinite(speed2) else 0.0
 
 
-def motion_variance(per_speed2: float, speed2: float, inflation: float | None) -> float:
-    """The pixel variance (px^2) the blur of a frame at squared image speed ``speed2`` adds:
-    MARGIN^2 x inflation x b s^2 (``per_speed2`` b, BlobSpread), none before the inflation is
-    known."""
+def motion_variance(growth: float, inflation: float | None) -> float:
+    """The pixel variance (px^2) the filter takes for a frame's blur of per-frame variance
+    ``growth`` (BlobSpread.growth at the frame's speed): MARGIN^2 x inflation x growth, none
+    before the inflation is known."""
     if inflation is None:
         return 0.0
-    return MARGIN**2 * inflation * per_speed2 * speed2
+    return MARGIN**2 * inflation * growth
 
 
 def filter_sigma(model_sigma: float, variance: float | None, inflation: float | None) -> float:

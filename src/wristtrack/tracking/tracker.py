@@ -14,7 +14,8 @@ has taught it the shape of the skin between the markers, a second update with th
 (tracking/surface.py). The generic path (tracking/generic_step.py) is the reference and reads
 like the paper; for the default configuration the same step runs as one compiled call
 (tracking/compiled.py, numba) where numba loads, and the generic path takes every other
-configuration and every frame the compiled step declines. The manoeuvre retry and the
+configuration and every frame the compiled step declines. The retries of a frame the update
+cannot explain (tracking/retries.py: a long shutter's blur, a manoeuvre) and the
 innovation-consistency (NIS) logic sit above both; each update then tells how much the skin
 over the knuckles slides and how sharp the blobs are (tracking/noise_scale.py). After a gap
 (frames dropped) the update is iterated over its posterior, and an update that leaves the
@@ -35,7 +36,7 @@ from wristtrack.filter import ukf
 from wristtrack.filter.ukf import chi2_quantile
 from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose, marker_image_diameter
-from wristtrack.tracking import compiled, hypotheses, noise_scale, surface
+from wristtrack.tracking import compiled, hypotheses, noise_scale, retries, surface
 from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.generic_step import fit_covariance, generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
@@ -300,7 +301,7 @@ class Tracker:
         dt = det.timestamp - track.timestamp
         out = plain = self._filter_frame(det, track, dt)
         if _undoubted(det) >= cfg.min_markers and hasattr(self.model, "angular_velocity"):
-            out = self._manoeuvre_retry(det, track, dt, plain)
+            out = retries.retried(self, det, track, dt, plain)
         x, P, labels, n_assoc, nis, dof, merged_markers = out
         if not (ukf.all_finite(x) and ukf.all_finite(P)):  # never let a numerical failure leak out
             self._lose()
@@ -379,24 +380,6 @@ class Tracker:
                                    det.depth_image, self.config.measurement, self.config.surface,
                                    self.camera, self.config.ukf)
         return (x, P, *out[2:])
-
-    def _manoeuvre_retry(self, det: Detections, track: _Track, dt: float, out: tuple) -> tuple:
-        """``out``, or a consistent re-association assuming a manoeuvre (see TrackerConfig)."""
-        cfg, model = self.config, self.model
-        n_assoc, nis, dof = out[3], out[4], out[5]
-        if n_assoc >= cfg.min_markers and not (dof and nis > chi2_quantile(cfg.nis_quantile, dof)):
-            return out
-        for accel, angular in cfg.manoeuvre_accel:
-            P = track.P.copy()
-            for part, a in ((model.velocity, accel), (model.angular_velocity, angular)):
-                i = np.arange(P.shape[0])[part]
-                P[i, i] += (a * dt) ** 2
-            retry = self._filter_frame(det, replace(track, P=P), dt)
-            n, r_nis, r_dof = retry[3], retry[4], retry[5]
-            consistent = r_nis <= chi2_quantile(cfg.nis_quantile, r_dof)
-            if n >= max(cfg.min_markers, n_assoc) and consistent:
-                return retry
-        return out
 
     def _compiled_frame(self, det: Detections, track: _Track, dt: float) -> tuple | None:
         """``_generic_frame``'s result from the compiled step, or None where this configuration
@@ -492,9 +475,9 @@ class Tracker:
 
 
 def _undoubted(det: Detections) -> int:
-    """The blobs the detector does not doubt. A manoeuvre retry widens the prior and leaves the
-    labels to the blobs' pattern; among doubted blobs (taken at the model's pixel noise: in the
-    lamp's shade, merged knuckles) a labelling shifted by one marker along the knuckles passes
-    the consistency test too (a right hand in ulnar deviation and supination: 4 deg off, then
-    36)."""
+    """The blobs the detector does not doubt. A retry (tracking/retries.py) widens the prior or
+    the pixel noise and leaves the labels to the blobs' pattern; among doubted blobs (taken at
+    the model's pixel noise: in the lamp's shade, merged knuckles) a labelling shifted by one
+    marker along the knuckles passes the consistency test too (a right hand in ulnar deviation
+    and supination: 4 deg off, then 36)."""
     return det.count if det.suspect is None else int(det.count - np.count_nonzero(det.suspect))
