@@ -165,6 +165,12 @@ def _robustness(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     return summary_lines(f["robustness"]), section
 
 
+def _still_reach(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
+    from benchmarks.still_reach import still_reach_section
+
+    return still_reach_section(ctx.cache, ctx.seeds[:1] if ctx.quick else ctx.seeds)
+
+
 def _spread(ctx: Context, f: dict) -> tuple[list[str], list[str]]:
     from benchmarks.seed_spread import SPREAD_SEEDS, seed_spread, spread_section
 
@@ -226,6 +232,7 @@ SECTIONS: dict[str, Section] = {  # in the document's order
     "simulated": _simulated,
     "rendered": _rendered,
     "robustness": _robustness,
+    "still_reach": _still_reach,
     "spread": _spread,
     "budget": _budget,
     "batch": _batch,
