@@ -51,11 +51,11 @@ takes a (within the bounds below) for every blob, and each frame adds MARGIN^2 x
 b s^2 at the frame's speed (:func:`motion_variance`), up to the model's sigma. With the average
 alone the shutter cost 0.24 -> 0.29 deg; with the speed 0.20. Until the frames have moved, b is
 a long shutter's (``BLUR_PRIOR``): a first movement's blobs are smeared before any frame shows
-it. The scatter does not grow as s^2 all the way, though: flat to ~2 px/frame, then steeply.
-A movement's first, slow frames take b to about 0 whatever the shutter, and b is evidence only
-up to the fastest frames it was learned from (``BlobSpread.growth``); a faster frame that the
-update then cannot explain is tried again with the prior's growth beyond them
-(tracking/retries.py).
+it. The scatter does not grow as s^2 all the way, though: hardly below ~2 px/frame, steeply
+above (the figures above). A movement's first, slow frames take b to about 0 whatever the
+shutter, and b is evidence only up to the fastest frames it was learned from
+(``BlobSpread.growth``); a faster frame that the update then cannot explain is tried again with
+the prior's growth beyond them (tracking/retries.py).
 
 MARGIN: with the sigma fixed, the rendered recordings came out best at about twice the blobs'
 white-noise equivalent (clean and structured light at 0.05 px or below for 0.027, Bayer at 0.1
@@ -146,10 +146,11 @@ class BlobSpread:
     its smeared blobs at the sharp ones' sigma. Rendered reaches under a 1/30 s shutter
     (5 seeds): orientation RMSE 0.330 -> 0.254 deg, worst range-of-motion error 2.49 -> 1.48
     (smoothed 1.29 -> 0.99); the robustness conditions, whose movements show their blur, within
-    0.002 deg. The slow frames at the start of a movement, truly sharp, then took b to 0 before
-    the fast ones came (a window at up to 1 px/frame, where a 1/30 s shutter's blobs are as
-    sharp as at rest): hence ``fastest2`` and the long shutter's retry (tracking/retries.py),
-    0.254 -> 0.211 deg, 1.48 -> 1.04 (smoothed 0.99 -> 0.69) on the same reaches."""
+    0.002 deg. The slow frames at the start of a movement then took b to 0 before the fast
+    ones came (a window at up to 1 px/frame, where a 1/30 s shutter's blobs scatter about
+    their rigid fit as at rest): hence ``fastest2`` and the long shutter's retry
+    (tracking/retries.py), 0.254 -> 0.211 deg, 1.48 -> 1.04 (smoothed 0.99 -> 0.69) on the same
+    reaches."""
 
     def __init__(self) -> None:
         # forgetting sums of d/v^2, d s^2/v^2, d s^4/v^2, E/v^2, E s^2/v^2
