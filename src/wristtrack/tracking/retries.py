@@ -28,13 +28,19 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from itertools import chain
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wristtrack.filter.ukf import chi2_quantile
 
+if TYPE_CHECKING:  # the tracker imports this module
+    from wristtrack.detect.detections import Detections
+    from wristtrack.tracking.tracker import Tracker, _Track
 
-def retried(tracker, det, track, dt: float, out: tuple) -> tuple:
+
+def retried(tracker: Tracker, det: Detections, track: _Track, dt: float,
+            out: tuple) -> tuple:
     """``out`` (Tracker._filter_frame's result for the detections ``det`` from ``track``, ``dt``
     s on), or the first retry that explains the frame (module doc)."""
     cfg = tracker.config
@@ -49,7 +55,8 @@ def retried(tracker, det, track, dt: float, out: tuple) -> tuple:
     return out
 
 
-def long_shutter(tracker, det, track, dt: float) -> Iterator[tuple]:
+def long_shutter(tracker: Tracker, det: Detections, track: _Track,
+                 dt: float) -> Iterator[tuple]:
     """The frame updated with a long shutter's blur beyond the speeds the blobs' spread was
     learned at (noise_scale.LearnedNoise.long_shutter_variance); nothing where that adds no
     noise."""
@@ -62,7 +69,8 @@ def long_shutter(tracker, det, track, dt: float) -> Iterator[tuple]:
     yield result
 
 
-def manoeuvre(tracker, det, track, dt: float) -> Iterator[tuple]:
+def manoeuvre(tracker: Tracker, det: Detections, track: _Track,
+              dt: float) -> Iterator[tuple]:
     """The frame updated with the prior's velocity variances raised by (a dt)^2, (alpha dt)^2
     for each (a m/s^2, alpha rad/s^2) of TrackerConfig.manoeuvre_accel in turn."""
     model = tracker.model
