@@ -28,21 +28,19 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from itertools import chain
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
+from wristtrack.detect.detections import Detections
 from wristtrack.filter.ukf import chi2_quantile
 
-if TYPE_CHECKING:  # the tracker imports this module
-    from wristtrack.detect.detections import Detections
-    from wristtrack.tracking.tracker import Tracker, _Track
 
-
-def retried(tracker: Tracker, det: Detections, track: _Track, dt: float,
-            out: tuple) -> tuple:
-    """``out`` (Tracker._filter_frame's result for the detections ``det`` from ``track``, ``dt``
-    s on), or the first retry that explains the frame (module doc)."""
+def retried(tracker: Any, det: Detections, track: Any, dt: float, out: tuple) -> tuple:
+    """``out`` (Tracker._filter_frame's result for the detections ``det`` from the tracker's
+    ``track``, ``dt`` s on), or the first retry that explains the frame (module doc). The
+    tracker and its track are typed Any, as in tracking/hypotheses.py: the tracker imports this
+    module."""
     cfg = tracker.config
     n_assoc, nis, dof = out[3], out[4], out[5]
     if n_assoc >= cfg.min_markers and not (dof and nis > chi2_quantile(cfg.nis_quantile, dof)):
@@ -55,8 +53,7 @@ def retried(tracker: Tracker, det: Detections, track: _Track, dt: float,
     return out
 
 
-def long_shutter(tracker: Tracker, det: Detections, track: _Track,
-                 dt: float) -> Iterator[tuple]:
+def long_shutter(tracker: Any, det: Detections, track: Any, dt: float) -> Iterator[tuple]:
     """The frame updated with a long shutter's blur beyond the speeds the blobs' spread was
     learned at (noise_scale.LearnedNoise.long_shutter_variance); nothing where that adds no
     noise."""
@@ -69,8 +66,7 @@ def long_shutter(tracker: Tracker, det: Detections, track: _Track,
     yield result
 
 
-def manoeuvre(tracker: Tracker, det: Detections, track: _Track,
-              dt: float) -> Iterator[tuple]:
+def manoeuvre(tracker: Any, det: Detections, track: Any, dt: float) -> Iterator[tuple]:
     """The frame updated with the prior's velocity variances raised by (a dt)^2, (alpha dt)^2
     for each (a m/s^2, alpha rad/s^2) of TrackerConfig.manoeuvre_accel in turn."""
     model = tracker.model
