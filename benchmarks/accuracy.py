@@ -177,17 +177,24 @@ def score(results: list[FrameResult], truth: Trajectory) -> dict[str, float]:
     t = np.stack([r.t_ch for r in results])
     n = len(results)
     e = pose_errors(R, t, truth.R_ch[:n], truth.t_ch[:n])
-    rel = np.stack([r.R for r in results])
-    ok = np.isfinite(rel).all(axis=(1, 2))
-    rom = np.nan
-    if ok.sum() > 1:
-        est = np.degrees(wrist_angles(rel[ok]))
-        true = np.degrees(truth.angles[:n])
-        rom = float(np.max(np.abs(np.ptp(est, axis=0) - np.ptp(true, axis=0))))
+    rom = float(np.max(np.abs(range_errors(results, truth))))
     return {
         "rot": e.orientation_rmse_deg, "rot95": e.orientation_p95_deg, "pos": e.position_rmse_mm,
         "rom": rom, "fail": e.failure_rate, "cover": e.coverage, "frames": n,
     }
+
+
+def range_errors(results: list[FrameResult], truth: Trajectory) -> np.ndarray:
+    """(3,) estimated minus true range of each anatomical axis (deviation, flexion, pronation),
+    degrees: the estimate's over the frames with one, the truth's over all the frames (as
+    ``wristtrack evaluate``); NaN where fewer than two frames have an estimate."""
+    rel = np.stack([r.R for r in results])
+    ok = np.isfinite(rel).all(axis=(1, 2))
+    if ok.sum() < 2:
+        return np.full(3, np.nan)
+    est = np.degrees(wrist_angles(rel[ok]))
+    true = np.degrees(truth.angles[: len(results)])
+    return np.ptp(est, axis=0) - np.ptp(true, axis=0)
 
 
 def bound(case: SimCase, n: int | None = None, depth: bool = True) -> np.ndarray:

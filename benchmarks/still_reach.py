@@ -17,8 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, recorded_detections, score
-from wristtrack.geometry import wrist_angles
+from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, range_errors, recorded_detections, score
 from wristtrack.sim.realism import PRESET_REAL
 from wristtrack.sim.render import render_recording
 
@@ -40,16 +39,11 @@ COMBINED = "all (preset real)"
 TARGETS = {"default": ("filtered", 1.0), "default, smoothed (offline)": ("smoothed", 0.7)}
 
 
-def range_errors(results: list, truth) -> tuple[float, float]:
-    """(error of the turning axis' range, worst error of the still axes' ranges) in degrees, over
-    the frames with an estimate (NaN where fewer than two)."""
-    rel = np.stack([r.R for r in results])
-    ok = np.isfinite(rel).all(axis=(1, 2))
-    if ok.sum() < 2:
-        return np.nan, np.nan
-    err = np.ptp(np.degrees(wrist_angles(rel[ok])), axis=0) \
-        - np.ptp(np.degrees(truth.angles[: len(results)][ok]), axis=0)
-    return float(abs(err[TURNING])), float(np.abs(err[list(STILL)]).max())
+def axis_errors(results: list, truth) -> tuple[float, float]:
+    """(error of the turning axis' range, worst error of the still axes' ranges) in degrees
+    (benchmarks.accuracy.range_errors; NaN where fewer than two frames have an estimate)."""
+    err = np.abs(range_errors(results, truth))
+    return float(err[TURNING]), float(err[list(STILL)].max())
 
 
 def still_reach(cache: Path, seeds: tuple[int, ...]) -> dict[str, dict[str, dict[str, float]]]:
@@ -65,7 +59,7 @@ def still_reach(cache: Path, seeds: tuple[int, ...]) -> dict[str, dict[str, dict
             for label, row in TRACKERS.items():
                 results = ACCURACY_ROWS[row].run(camera, hand, detections)
                 m = score(results, truth)
-                turning, still = range_errors(results, truth)
+                turning, still = axis_errors(results, truth)
                 per[condition][label].append({"rot": m["rot"], "pos": m["pos"],
                                               "turning": turning, "still": still,
                                               "cover": m["cover"]})

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from benchmarks.still_reach import COMBINED, range_errors, summary_lines
+from benchmarks.still_reach import COMBINED, axis_errors, summary_lines
 from wristtrack.geometry import matrix_from_wrist_angles
 
 
@@ -26,10 +26,10 @@ def test_range_errors_split_the_turning_axis_from_the_still_ones():
     est[:, 0] = [0.0, 0.1, -0.2, 0.1, 0.0]
     est[:, 2] = [0.3, -0.5, 0.0, 5.0, 0.2]
     truth = SimpleNamespace(angles=np.radians(true))
-    turning, still = range_errors(_results(est, missing=(3,)), truth)
+    turning, still = axis_errors(_results(est, missing=(3,)), truth)
     assert turning == pytest.approx(0.5, abs=1e-9)
     assert still == pytest.approx(0.8, abs=1e-9)
-    assert np.isnan(range_errors(_results(est, missing=(0, 1, 2, 3)), truth)[1])
+    assert np.isnan(axis_errors(_results(est, missing=(0, 1, 2, 3)), truth)[1])
 
 
 def test_summary_says_whether_the_still_axes_meet_the_targets():
