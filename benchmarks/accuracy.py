@@ -410,7 +410,7 @@ def recorded_detections(
     from wristtrack.detect.detector import MarkerDetector
     from wristtrack.io.open import open_recording
     from wristtrack.io.poses import read_poses, rows_to_poses
-    from wristtrack.pipeline.track import follow_colours
+    from wristtrack.pipeline.colours import follow_colours
 
     with open_recording(recording_dir) as recording:
         camera, hand = recording.camera, recording.hand

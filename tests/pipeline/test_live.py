@@ -286,8 +286,8 @@ def test_colours_learnt_in_the_background_are_all_handed_over(reach):
     them to its detector: the hue-saturation models and the mean marker and skin colours the
     searches for blurred and shaded markers need, the same as the offline run learns in place."""
     from wristtrack.detect.detector import MarkerDetector
+    from wristtrack.pipeline.colours import learn_colours
     from wristtrack.pipeline.live.loop import BackgroundLearning
-    from wristtrack.pipeline.track import learn_colours
     from wristtrack.tracking.tracker import Status, Tracker
 
     with FolderRecording(reach) as rec:

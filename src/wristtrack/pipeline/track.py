@@ -21,14 +21,15 @@ from wristtrack.analysis.summary import SummaryAccumulator, camera_pose_dict
 from wristtrack.detect.config import DetectorConfig, detector_config
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
-from wristtrack.filter.ukf import chi2_quantile
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.poses import PosesWriter, pose_row
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
+from wristtrack.pipeline.colours import follow_colours
 from wristtrack.pipeline.interrupt import DeferredInterrupt
+from wristtrack.pipeline.sinks import NoStates, progress_bar
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.pipeline.surveyed import (
     hand_of,
@@ -139,10 +140,11 @@ class _Passes:
         checkpoints = ckpt.Checkpointer(out, fingerprint, self.checkpoint_every)
         run, start = _open_run(recording, out, self.config, self.detector_settings,
                                fingerprint, resume, survey)
-        bar = _progress(recording, self.progress, "surveying the hand" if survey else "tracking")
+        bar = progress_bar(recording, self.progress,
+                           "surveying the hand" if survey else "tracking")
         bar.update(start)
         smooth = self.smooth  # a first pass too: it is the run if the survey finds nothing
-        states = _state_writer(out, run.tracker, resume) if smooth else _NoStates()
+        states = _state_writer(out, run.tracker, resume) if smooth else NoStates()
         files = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
         with PosesWriter(out / "poses.csv", append=resume) as writer, states:
             rows = _Rows(writer, states, overlay, bar)
@@ -226,7 +228,7 @@ class _Rows:
     the overlay video, the progress bar."""
 
     writer: PosesWriter
-    states: StateWriter | _NoStates
+    states: StateWriter | NoStates
     overlay: Any
     bar: Any
 
@@ -397,45 +399,6 @@ def no_initialisation_message(recording: Recording, n_frames: int, tracker: Trac
     )
 
 
-# The detector's colours follow slow changes of the light (detector.adapt) from every
-# ADAPT_EVERY-th frame whose markers the tracker labelled confidently: at least 4 blobs labelled
-# (a merged blob is one colour sample) and an update whose NIS is within its 95 % quantile.
-ADAPT_EVERY = 10
-ADAPT_NIS_QUANTILE = 0.95
-
-
-def _confident(result: FrameResult) -> bool:
-    labelled = np.unique(result.labels[result.labels >= 0]).size
-    return (result.status == Status.TRACKING and labelled >= 4 and result.nis_dof > 0
-            and result.nis <= chi2_quantile(ADAPT_NIS_QUANTILE, result.nis_dof))
-
-
-def follow_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
-                   index: int, learned: bool) -> bool:
-    """What ``track`` does with the detector's colours after each frame: learn them at the
-    first fix, then adapt them every ADAPT_EVERY-th confident frame. Returns ``learned``."""
-    if not learned and result.status == Status.TRACKING:
-        learn_colours(detector, bgr, det, result)
-        return True
-    if learned and index % ADAPT_EVERY == 0 and _confident(result):
-        learn_colours(detector, bgr, det, result, adapt=True)
-    return learned
-
-
-def learn_colours(detector: MarkerDetector, bgr: np.ndarray, det, result: FrameResult,
-           adapt: bool = False) -> None:
-    """Refine the detector's colour models from the six labelled markers of the first fix, or
-    (``adapt``) blend in the markers labelled in this frame."""
-    uv = np.full((6, 2), np.nan)
-    for blob, label in enumerate(result.labels):
-        if label >= 0:
-            uv[label] = det.uv[blob]
-    if adapt:
-        detector.adapt(bgr, uv)
-    elif np.isfinite(uv).all():
-        detector.learn_markers(bgr, uv)
-
-
 def skipped_row(index: int, timestamp: float, n_blobs: int, status: str) -> list[str]:
     return pose_row(
         index, timestamp, status, R_ch=_NAN33, t_ch=_NAN3, R=_NAN33, p=_NAN3, v=_NAN3, w=_NAN3,
@@ -461,40 +424,3 @@ def _state_writer(out: Path, tracker: Tracker, append: bool = False) -> StateWri
     model = tracker.model
     state_dim = model.initial_state(np.eye(3), np.zeros(3)).size
     return StateWriter(out / STATES_FILE, state_dim, model.dim, append=append)
-
-
-class _NoStates:
-    def write(self, frame: int, timestamp: float, result) -> None:
-        pass
-
-    def flush(self) -> None:
-        pass
-
-    def __enter__(self) -> _NoStates:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        pass
-
-
-class _NoBar:
-    def update(self, n: int) -> None:
-        pass
-
-    def write(self, line: str, file=None) -> None:
-        print(line, file=file or sys.stderr)
-
-    def close(self) -> None:
-        pass
-
-
-def _progress(recording: Recording, enabled: bool, desc: str = "tracking"):
-    if not enabled:
-        return _NoBar()
-    from tqdm import tqdm
-
-    try:
-        total = len(recording) or None
-    except TypeError:
-        total = None
-    return tqdm(total=total, unit="frame", desc=desc, leave=False)

@@ -41,9 +41,9 @@ from wristtrack.io.base import Frame, Recording
 from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.io.run_folder import SURVEYED_HAND
+from wristtrack.pipeline.colours import learn_colours
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.track import (
-    learn_colours,
     no_initialisation_message,
     settings_dict,
     skipped_row,
