@@ -72,14 +72,18 @@ def chromium() -> str:
     pytest.skip(f"no Chromium for the browser check: install it with `{CHROMIUM_INSTALL}`")
 
 
-def _interrupt_at(recording, index: int) -> None:
-    """Make ``recording`` deliver a real SIGINT to this process as frame ``index`` is read."""
+def _interrupt_at(recording, index: int, nth: int = 1) -> None:
+    """Make ``recording`` deliver a real SIGINT to this process as frame ``index`` is read for
+    the ``nth`` time (a run reads its first seconds twice: once to prime the noise)."""
     frames = recording.frames
+    reads = [0]
 
     def interrupted(start=0):
         for frame in frames(start):
             if frame.index == index:
-                signal.raise_signal(signal.SIGINT)
+                reads[0] += 1
+                if reads[0] == nth:
+                    signal.raise_signal(signal.SIGINT)
             yield frame
 
     recording.frames = interrupted
@@ -87,7 +91,8 @@ def _interrupt_at(recording, index: int) -> None:
 
 @pytest.fixture(scope="session")
 def interrupt_at() -> Callable:
-    """``interrupt_at(recording, index)``: a real Ctrl-C as that frame is read (see above)."""
+    """``interrupt_at(recording, index, nth=1)``: a real Ctrl-C as that frame is read (the nth
+    time; see above)."""
     return _interrupt_at
 
 

@@ -23,6 +23,7 @@ from wristtrack.io.folder import FolderRecording
 from wristtrack.io.poses import read_poses, rows_to_poses
 from wristtrack.pipeline.live.loop import Captured, NewestFrameSlot, track_live
 from wristtrack.pipeline.track import track_recording
+from wristtrack.tracking.config import TrackerConfig
 
 ANGLES = ("deviation_deg", "flexion_deg", "pronation_deg")
 
@@ -58,8 +59,9 @@ def _agree(live, reach, cut_recording, tmp_path, deg, mm):
     at one sigma of the difference fails such a run a third of the time."""
     taken = live["status"] != "dropped"
     cut = cut_recording(reach, np.asarray(live["frame"][taken], int), tmp_path / "taken")
-    with FolderRecording(cut) as rec:
-        track_recording(rec, tmp_path / "taken-run", progress=False)
+    with FolderRecording(cut) as rec:  # learning its noise from the first frame on, as live
+        track_recording(rec, tmp_path / "taken-run", TrackerConfig(prime_noise=False),
+                        progress=False)
     offline = read_poses(tmp_path / "taken-run" / "poses.csv")
     status = live["status"][taken]
     done = np.isin(status, ("tracking", "coasting"))
@@ -120,6 +122,7 @@ def test_replay_tracks_in_real_time_and_records_what_retracks_the_same(
     _agree(poses, reach, cut_recording, tmp_path, deg=0.5, mm=1.0)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["settings"]["live"] and summary["live"]["frames"] == live["frames"]
+    assert summary["settings"]["prime_noise"] is False  # a live camera is read once
 
     # --record: the same frames, timestamps and camera, so offline re-tracking gives the poses
     # of the recording itself (the live run's within filter noise)

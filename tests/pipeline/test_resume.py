@@ -36,9 +36,9 @@ def reference(rec, tmp_path_factory):
     return out
 
 
-def _run_interrupted(interrupt_at, rec, out, index, **kw):
+def _run_interrupted(interrupt_at, rec, out, index, nth=1, **kw):
     with open_recording(rec) as recording:
-        interrupt_at(recording, index)
+        interrupt_at(recording, index, nth)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out, progress=False, checkpoint_every=10, **kw)
 
@@ -60,7 +60,8 @@ def _data_lines(path):
 def test_interrupt_then_resume_gives_the_uninterrupted_result(rec, reference, tmp_path, index,
                                                               interrupt_at):
     out = tmp_path / "run"
-    _run_interrupted(interrupt_at, rec, out, index)
+    # the run's own read of the frame: its first 10 s were read once before, to prime the noise
+    _run_interrupted(interrupt_at, rec, out, index, nth=2)
     # stopped at a frame boundary: exactly the frames before the interrupt, all complete
     assert _data_lines(out / "poses.csv") == _data_lines(reference / "poses.csv")[:index]
     assert _summary(out)["interrupted"] is True
@@ -69,6 +70,20 @@ def test_interrupt_then_resume_gives_the_uninterrupted_result(rec, reference, tm
     assert (out / "poses.csv").read_bytes() == (reference / "poses.csv").read_bytes()
     assert summary == _summary(reference)  # accumulated state carried over exactly
     assert not (out / CHECKPOINT_FILE).exists()
+
+
+def test_interrupted_while_priming_the_noise_resumes_to_the_uninterrupted_result(
+        rec, reference, tmp_path, interrupt_at):
+    """A Ctrl-C while the first seconds prime the noise (pipeline/track.py) stops the run once
+    they have: no frame written, a checkpoint of the primed tracker, from which --resume gives
+    the run that was never interrupted."""
+    out = tmp_path / "run"
+    _run_interrupted(interrupt_at, rec, out, 23, nth=1)
+    assert _data_lines(out / "poses.csv") == []
+    assert (out / CHECKPOINT_FILE).is_file()
+    _resume(rec, out)
+    assert (out / "poses.csv").read_bytes() == (reference / "poses.csv").read_bytes()
+    assert _summary(out) == _summary(reference)
 
 
 def test_interrupted_smoothed_run_resumes_to_the_same_smoothed_result(rec, tmp_path,

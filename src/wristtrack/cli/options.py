@@ -27,7 +27,7 @@ def non_negative_float(text: str) -> float:
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
     """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide,
-    --[no-]follow-offset, --fixed-noise and --coast-limit, read back by
+    --[no-]follow-offset, --fixed-noise, --[no-]prime-noise and --coast-limit, read back by
     :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
@@ -54,6 +54,12 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
              "learning them from the recording (every recording weighed alike; summary.json "
              "says what was learned otherwise)")
     parser.add_argument(
+        "--prime-noise", action=argparse.BooleanOptionalAction, default=True,
+        help="start a recording's run from the noise a first pass over its first 10 s learns "
+             "(the default; a live camera cannot: it learns from its first frame on); "
+             "--no-prime-noise learns from the first frame on offline too, as a live run "
+             "does")
+    parser.add_argument(
         "--coast-limit", nargs=2, type=non_negative_float, metavar=("DEG", "MM"),
         default=None,
         help="a frame with too few markers reports the predicted pose only while that adds at "
@@ -75,6 +81,6 @@ def tracker_config(args: argparse.Namespace):
                          surface=None if args.no_skin_depth else SurfaceSettings(),
                          adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise,
                          follow_slide=args.follow_slide, follow_offset=args.follow_offset,
-                         **limit)
+                         prime_noise=args.prime_noise, **limit)
 
 

@@ -1,11 +1,29 @@
-"""Where a pass's rows go besides poses.csv: the progress bar, and the sink of what a pass
-does not keep (the filter states of a run without --smooth)."""
+"""Where a pass's rows go besides poses.csv: the progress bar, and the sinks of what a pass
+does not keep (no --smooth states, the priming pass's rows)."""
 
 from __future__ import annotations
 
 import sys
 
 from wristtrack.io.base import Recording
+
+
+class Discarded:
+    """poses.csv of the priming pass (track._Priming): kept nowhere."""
+
+    def write(self, row) -> None:
+        pass
+
+    def write_result(self, result) -> None:
+        pass
+
+
+class Muted:
+    """The priming pass's lines about its frames (a frame skipped): said by the run itself,
+    which reads the same frames again."""
+
+    def write(self, line: str, file=None) -> None:
+        pass
 
 
 class NoStates:
@@ -37,14 +55,15 @@ class NoBar:
         pass
 
 
-def progress_bar(recording: Recording, enabled: bool, desc: str = "tracking"):
-    """A progress bar over ``recording``'s frames."""
+def progress_bar(recording: Recording, enabled: bool, desc: str = "tracking",
+                 counted: bool = True):
+    """A progress bar over ``recording``'s frames (``counted``: out of its length)."""
     if not enabled:
         return NoBar()
     from tqdm import tqdm
 
     try:
-        total = len(recording) or None
+        total = (len(recording) or None) if counted else None
     except TypeError:
         total = None
     return tqdm(total=total, unit="frame", desc=desc, leave=False)

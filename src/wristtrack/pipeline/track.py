@@ -29,7 +29,7 @@ from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.colours import follow_colours
 from wristtrack.pipeline.interrupt import DeferredInterrupt
-from wristtrack.pipeline.sinks import NoStates, progress_bar
+from wristtrack.pipeline.sinks import Discarded, Muted, NoStates, progress_bar
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.pipeline.surveyed import (
     hand_of,
@@ -38,6 +38,7 @@ from wristtrack.pipeline.surveyed import (
     second_pass_begun,
 )
 from wristtrack.tracking.layout_survey import RunSurvey
+from wristtrack.tracking.noise_scale import PRIMING_S
 from wristtrack.tracking.tracker import FrameResult, Status, Tracker, TrackerConfig
 
 if TYPE_CHECKING:
@@ -140,6 +141,11 @@ class _Passes:
         checkpoints = ckpt.Checkpointer(out, fingerprint, self.checkpoint_every)
         run, start = _open_run(recording, out, self.config, self.detector_settings,
                                fingerprint, resume, survey)
+        # the run's own pass (not a survey's), fresh, of a recording that can be read twice
+        primed = (self.config.primes_noise and survey is None and not resume
+                  and ckpt.input_identity(recording) is not None)
+        prime = _Priming(recording, self.config, self.detector_settings, labels,
+                         self.progress) if primed else None
         bar = progress_bar(recording, self.progress,
                            "surveying the hand" if survey else "tracking")
         bar.update(start)
@@ -150,7 +156,7 @@ class _Passes:
             rows = _Rows(writer, states, overlay, bar)
             try:
                 interrupted = _frame_loop(recording.frames(start), run, labels, rows,
-                                          checkpoints, files, recording.has_depth)
+                                          checkpoints, files, recording.has_depth, prime)
             finally:
                 bar.close()
         return _finish(recording, out, run, self.config, settings, smooth, interrupted,
@@ -249,11 +255,14 @@ def _frame_loop(
     checkpoints: ckpt.Checkpointer,
     files: list[Path],
     has_depth: bool,
+    prime: _Priming | None = None,
 ) -> bool:
-    """Track ``frames`` one by one (of a recording with depth where ``has_depth``); True if the
-    run was interrupted (Ctrl-C, SIGTERM)."""
+    """Track ``frames`` one by one (of a recording with depth where ``has_depth``), after
+    ``prime`` has primed the tracker; True if the run was interrupted (Ctrl-C, SIGTERM)."""
     with DeferredInterrupt() as stop:
         try:
+            if prime is not None:
+                prime(run.tracker)
             for frame in frames:
                 # Between two frames every object is consistent: the moment to checkpoint.
                 if stop.requested or checkpoints.due(frame.index):
@@ -301,6 +310,41 @@ def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None
     if rows.overlay is not None:
         rows.overlay.add(frame.bgr, det, result)
     run.summary.add(result)
+
+
+@dataclass
+class _Priming:
+    """A first pass over the recording's first PRIMING_S that learns its markers' noise for
+    the run to start from (TrackerConfig.prime_noise): a fresh detector and tracker, their rows
+    discarded. Its frames are read, detected and tracked again by the run."""
+
+    recording: Recording
+    config: TrackerConfig
+    detector: DetectorConfig
+    labels: Any
+    progress: bool
+
+    def __call__(self, tracker: Tracker) -> None:
+        """Prime ``tracker`` (fresh). A Ctrl-C meanwhile stops the run once it is primed
+        (a few seconds at most), so that its checkpoint resumes as the whole run would have
+        gone; a second one stops at once, without a checkpoint."""
+        first = _RunState(MarkerDetector(self.recording.camera, self.detector),
+                          Tracker(self.recording.camera, self.recording.hand, self.config),
+                          SummaryAccumulator())
+        bar = progress_bar(self.recording, self.progress, "learning the noise", counted=False)
+        rows = _Rows(Discarded(), NoStates(), None, Muted())
+        frames, begin = self.recording.frames(), None
+        try:
+            for frame in frames:
+                begin = frame.timestamp if begin is None else begin
+                if frame.timestamp - begin > PRIMING_S:
+                    break
+                _track_frame(frame, first, self.labels, rows)
+                bar.update(1)
+        finally:
+            frames.close()
+            bar.close()
+        tracker.start_from(first.tracker.learned_noise)
 
 
 # ------------------------------------------------------------------------------ finishing

@@ -27,6 +27,12 @@ class TrackerConfig:
     # noise from it (tracking/noise_scale.py, pixel_noise.py); False: the model's throughout.
     adapt_slide: bool = True
     adapt_pixel: bool = True
+    # Offline, what is learned is primed: a first pass over the recording's first seconds
+    # learns it, and the run starts from there (pipeline/track.py, noise_scale.PRIMING_S)
+    # rather than from the model's noise, which left a recording's still start and first
+    # movement to the depth and to a long shutter's blur. A live camera cannot be read twice:
+    # it learns from its first frame on, as with False.
+    prime_noise: bool = True
     # The default model with the MCP markers' skin slide along the hand (distal, lateral) in its
     # state (tracking/slide_model.py); False: the slide as noise the markers share afresh each
     # frame, where a hand turned edge-on took part of it as a tilt (docs/BENCHMARKS.md, spread).
@@ -97,6 +103,12 @@ class TrackerConfig:
         recordings learning with it cost 0.95 -> 2.76 deg)."""
         return self.adapt_pixel and self.association == "gnn"
 
+    @property
+    def primes_noise(self) -> bool:
+        """Whether an offline run primes what the tracker learns: ``prime_noise``, where the
+        tracker learns anything."""
+        return self.prime_noise and (self.adapt_slide or self.learns_pixel_noise)
+
     def make_model(self):
         """The state model these settings name: the default model with the skin slide in its
         state where ``follow_slide`` (and a slide is modelled), and with the depth offset too
@@ -139,6 +151,7 @@ class TrackerConfig:
         kw.setdefault("gap_iterations", 0)
         kw.setdefault("merged_blobs", False)
         kw.setdefault("adapt_pixel", False)
+        kw.setdefault("prime_noise", False)  # nothing to prime: no slide, no pixel noise learned
         kw.setdefault("surface", None)
         kw.setdefault("coast_rot_sigma_deg", math.inf)
         kw.setdefault("coast_pos_sigma_mm", math.inf)

@@ -27,7 +27,9 @@ per-frame variance (:func:`frame_variance`): the model's 0.3 px over the first h
 left the still start's out-of-plane angles to the depth (structured light, 3 seeds: 0.308 ->
 0.285 deg; clean 0.169 -> 0.162), and on colour alone the filter's first turns to the pixels'
 mirror image (the rgb_only movement in 2 s: 5.2 -> 3.4 deg without the refit, 3.4 -> 2.6 with
-it). The noisier blobs of every effect at once reach the model's sigma anyway.
+it). The noisier blobs of every effect at once reach the model's sigma anyway. Offline, a run
+starts from what a first pass over the recording's first seconds learned (noise_scale.PRIMING_S):
+this start, and the prior inflation below, are then the priming pass's and a live run's.
 
 Until MIN_WINDOWS windows are measured the inflation is not known, only its bounds: 1 (white
 noise) and the number of frames a window holds, N (errors constant over it;

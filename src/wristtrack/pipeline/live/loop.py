@@ -266,7 +266,8 @@ def track_live(
                          "folder you can write to") from None
     for stale in ("summary.json", LIVE_JSON, SURVEYED_HAND):
         (out / stale).unlink(missing_ok=True)
-    config = config or TrackerConfig()
+    # a live camera cannot be read twice: its noise is learned from the first frame on
+    config = replace(config or TrackerConfig(), prime_noise=False)
     camera = source.camera
     detector = MarkerDetector(camera)
     tracker = Tracker(camera, source.hand, config)
