@@ -29,6 +29,7 @@ from wristtrack.hand import HandLayout
 from wristtrack.sim.detections import NoiseModel, SimFrame, acceptance_noise, simulate_detections
 from wristtrack.sim.motion import SCENARIOS, Trajectory, scenario
 from wristtrack.tracking.layout_survey import RunSurvey
+from wristtrack.tracking.noise_scale import PRIMING_S
 from wristtrack.tracking.tracker import FrameResult, Tracker, TrackerConfig
 
 Runner = Callable[[Camera, HandLayout, list[Detections]], list[FrameResult]]
@@ -47,22 +48,30 @@ def online(factory: Callable[[Camera, HandLayout], object]) -> Runner:
 def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list[Detections],
                      config: TrackerConfig | None = None) -> tuple[Tracker, list[FrameResult]]:
     """The default tracker (or one of ``config``) stepped through ``detections`` as
-    ``wristtrack track`` runs it: without a layout, a first pass surveys it over the recording
-    and a second tracks with it (pipeline/track.py; here on the same detections). The last
-    pass's tracker and results."""
+    ``wristtrack track`` runs it (pipeline/track.py; here on the same detections): without a
+    layout, a first pass surveys it over the recording and a second tracks with it; the pass
+    that tracks starts from the noise a pass over the first PRIMING_S learned
+    (TrackerConfig.prime_noise). The last pass's tracker and results."""
     config = TrackerConfig() if config is None else config
-    survey = RunSurvey() if layout is None else None
-    tracker = Tracker(camera, layout, config)
-    results = []
-    for d in detections:
-        results.append(tracker.step(d))
-        if survey is not None:
+    if layout is None:
+        survey = RunSurvey()
+        tracker = Tracker(camera, layout, config)
+        results = []
+        for d in detections:
+            results.append(tracker.step(d))
             survey.add(tracker, d, results[-1])
-    surveyed = survey.surveyed_layout() if survey is not None else None
-    if surveyed is not None:
-        tracker = Tracker(camera, surveyed, config)
-        results = [tracker.step(d) for d in detections]
-    return tracker, results
+        layout = survey.surveyed_layout()
+        if layout is None:  # nothing surveyed: the first pass is the run
+            return tracker, results
+    tracker = Tracker(camera, layout, config)
+    if config.primes_noise and detections:
+        first = Tracker(camera, layout, config)
+        for d in detections:
+            if d.timestamp - detections[0].timestamp > PRIMING_S:
+                break
+            first.step(d)
+        tracker.start_from(first.learned_noise)
+    return tracker, [tracker.step(d) for d in detections]
 
 
 def _default(camera: Camera, layout: HandLayout | None, detections: list[Detections]):

@@ -295,8 +295,9 @@ def robustness_sections(
         "pronation; 'mirrored movement' is each hand making the other's: the right hand "
         "ulnar deviation with supination at extension, which turns the back of the hand from "
         "the lamp, the left hand radial deviation with pronation (`sim.scenes.mirrored`). "
-        "The detector runs as `track` runs it; "
-        "every tracker gets the same blobs. Recall: markers used with their right label (blob "
+        "The detector runs as `track` runs it, and so does the default tracker (its noise "
+        "primed over the recording's first 10 s); every tracker gets the same blobs. "
+        "Recall: markers used with their right label (blob "
         f"within {USED_PX:g} px of the truth) / markers visible.",
         "",
         *lines,

@@ -100,7 +100,11 @@ def still_reach_section(cache: Path, seeds: tuple[int, ...]) -> tuple[list[str],
         "minimum-jerk reach over 1.2 s that extends the wrist 20 deg, 1.5 s still, the usual "
         "clinical task. Deviation and pronation do not move: their estimated range of motion is "
         "all error, the filter's noise peak to peak. The effects that cost this task most, "
-        "alone and combined (`simulate --preset real`); each tracker gets the same blobs.",
+        "alone and combined (`simulate --preset real`); each tracker gets the same blobs. The "
+        "default tracker runs as `track` runs it: a first pass over the recording learns its "
+        "noise, and the run starts from it (`--no-prime-noise` learns from the first frame "
+        "on, as live; at 23e7571 it always did: clean 0.89 / 0.62 deg on the still axes, "
+        "shutter 1.12 / 0.75, structured light 1.42 / 0.86, every effect 2.14 / 1.58).",
         "",
         *lines,
     ]
