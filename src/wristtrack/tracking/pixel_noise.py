@@ -17,19 +17,27 @@ learned sigma at the model's 0.3 px, and the lag that caused kept them there (0.
 0.05 px gave 0.20).
 
 The blob errors are correlated in time (the pixel grid, the codec's blocks and the blur change
-slowly while the hand moves slowly), and the filter, which weighs about half a second of
-frames, meets them larger than one frame's noise. So the sigma is the white-noise equivalent
-over WINDOW_S: the per-frame variance (``BlobSpread``) times the inflation that windows of the
+slowly while the hand moves slowly): over half a second they do not average away, where most of
+the depth's do (its errors less the colour-depth offset are nearly fresh each frame: an
+inflation of 1.2 on the clean and structured-light renders, docs/BENCHMARKS.md). Taken at one
+frame's scatter, the pixels would pull the pose towards their common error. (Not because the
+filter remembers them: it forgets a blob's error within about two frames; one frame's error
+moves the pose by 0.13-0.37 of itself the next frame and by nothing after, on the rendered
+recordings. Capping the inflation at those two frames took the every-effect recordings 0.555 ->
+0.504 deg, but a still hand's constant blob errors then pulled the pose: the clean reach 0.179
+-> 0.195, its still end 0.15 -> 0.22.) So the sigma is the white-noise equivalent over
+WINDOW_S: the per-frame variance (``BlobSpread``) times the inflation that windows of the
 residuals show, (sum_w e)^2 / sum_w e^2 (1 for white noise, the number of frames for a
-constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from the truth), times
-MARGIN. Before the first window closes, its frames so far (from EARLY_FRAMES on) give the
+constant; ``BlobCorrelation``: 2.2-8.9 on the rendered recordings, 2.6-5.7 from the truth),
+times MARGIN. Before the first window closes, its frames so far (from EARLY_FRAMES on) give the
 per-frame variance (:func:`frame_variance`): the model's 0.3 px over the first half second had
 left the still start's out-of-plane angles to the depth (structured light, 3 seeds: 0.308 ->
 0.285 deg; clean 0.169 -> 0.162), and on colour alone the filter's first turns to the pixels'
 mirror image (the rgb_only movement in 2 s: 5.2 -> 3.4 deg without the refit, 3.4 -> 2.6 with
 it). The noisier blobs of every effect at once reach the model's sigma anyway. Offline, a run
-starts from what a first pass over the recording's first seconds learned (noise_scale.PRIMING_S):
-this start, and the prior inflation below, are then the priming pass's and a live run's.
+starts from what a first pass over the recording's first seconds learned
+(noise_scale.PRIMING_S): this start, and the prior inflation below, are then the priming pass's
+and a live run's.
 
 Until MIN_WINDOWS windows are measured the inflation is not known, only its bounds: 1 (white
 noise) and the number of frames a window holds, N (errors constant over it;
