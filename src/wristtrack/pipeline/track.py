@@ -142,8 +142,9 @@ class _Passes:
         run, start = _open_run(recording, out, self.config, self.detector_settings,
                                fingerprint, resume, survey)
         # the run's own pass (not a survey's), fresh, of a recording that can be read twice
+        # (one with a fingerprint: not a live camera)
         primed = (self.config.primes_noise and survey is None and not resume
-                  and ckpt.input_identity(recording) is not None)
+                  and fingerprint is not None)
         prime = _Priming(recording, self.config, self.detector_settings, labels,
                          self.progress) if primed else None
         bar = progress_bar(recording, self.progress,
