@@ -29,7 +29,7 @@ from wristtrack.hand import HandLayout
 from wristtrack.sim.detections import NoiseModel, SimFrame, acceptance_noise, simulate_detections
 from wristtrack.sim.motion import SCENARIOS, Trajectory, scenario
 from wristtrack.tracking.layout_survey import RunSurvey
-from wristtrack.tracking.noise_scale import PRIMING_S
+from wristtrack.tracking.noise_scale import primes
 from wristtrack.tracking.tracker import FrameResult, Tracker, TrackerConfig
 
 Runner = Callable[[Camera, HandLayout, list[Detections]], list[FrameResult]]
@@ -67,7 +67,7 @@ def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list
     if config.primes_noise and detections:
         first = Tracker(camera, layout, config)
         for d in detections:
-            if d.timestamp - detections[0].timestamp > PRIMING_S:
+            if not primes(d.timestamp, detections[0].timestamp):
                 break
             first.step(d)
         tracker.start_from(first.learned_noise)

@@ -38,7 +38,7 @@ from wristtrack.pipeline.surveyed import (
     second_pass_begun,
 )
 from wristtrack.tracking.layout_survey import RunSurvey
-from wristtrack.tracking.noise_scale import PRIMING_S
+from wristtrack.tracking.noise_scale import primes
 from wristtrack.tracking.tracker import FrameResult, Status, Tracker, TrackerConfig
 
 if TYPE_CHECKING:
@@ -338,7 +338,7 @@ class _Priming:
         try:
             for frame in frames:
                 begin = frame.timestamp if begin is None else begin
-                if frame.timestamp - begin > PRIMING_S:
+                if not primes(frame.timestamp, begin):
                     break
                 _track_frame(frame, first, self.labels, rows)
                 bar.update(1)

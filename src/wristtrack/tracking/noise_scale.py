@@ -82,6 +82,12 @@ SCORE_INTERVAL_S = 0.25
 PRIMING_S = pixel_noise.TIME_CONSTANT_S
 
 
+def primes(timestamp: float, first: float) -> bool:
+    """Whether a frame at ``timestamp`` (s) belongs to the priming pass of a recording whose
+    first frame is at ``first``: within PRIMING_S of it."""
+    return timestamp - first <= PRIMING_S
+
+
 def component_scores(
     residual: np.ndarray, R: np.ndarray, HPH: np.ndarray, B: np.ndarray
 ) -> tuple[float, float]:
