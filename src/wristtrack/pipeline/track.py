@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,6 +23,7 @@ from wristtrack.errors import InitialisationError, InputError
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.base import Frame, Recording
 from wristtrack.io.poses import PosesWriter, pose_row
+from wristtrack.io.prefetch import frames_ahead
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
@@ -156,8 +156,8 @@ class _Passes:
         with PosesWriter(out / "poses.csv", append=resume) as writer, states:
             rows = _Rows(writer, states, overlay, bar)
             try:
-                interrupted = _frame_loop(recording.frames(start), run, labels, rows,
-                                          checkpoints, files, recording.has_depth, prime)
+                interrupted = _frame_loop(recording, start, run, labels, rows, checkpoints,
+                                          files, prime)
             finally:
                 bar.close()
         return _finish(recording, out, run, self.config, settings, smooth, interrupted,
@@ -249,32 +249,34 @@ class _Rows:
 
 
 def _frame_loop(
-    frames: Iterator[Frame],
+    recording: Recording,
+    start: int,
     run: _RunState,
     labels: Any,
     rows: _Rows,
     checkpoints: ckpt.Checkpointer,
     files: list[Path],
-    has_depth: bool,
     prime: _Priming | None = None,
 ) -> bool:
-    """Track ``frames`` one by one (of a recording with depth where ``has_depth``), after
-    ``prime`` has primed the tracker; True if the run was interrupted (Ctrl-C, SIGTERM)."""
+    """Track the frames of ``recording`` from ``start`` one by one, after ``prime`` has primed
+    the tracker; True if the run was interrupted (Ctrl-C, SIGTERM)."""
+    has_depth = recording.has_depth
     with DeferredInterrupt() as stop:
         try:
             if prime is not None:
                 prime(run.tracker)
-            for frame in frames:
-                # Between two frames every object is consistent: the moment to checkpoint.
-                if stop.requested or checkpoints.due(frame.index):
-                    rows.states.flush()  # poses.csv is flushed row by row
-                    checkpoints.save(frame.index, files, run.saved())
-                    if stop.requested:
-                        return True
-                if has_depth and frame.ok and frame.depth is None:
-                    run.without_depth.append(frame.index)
-                _track_frame(frame, run, labels, rows)
-                rows.bar.update(1)
+            with frames_ahead(recording, start) as frames:
+                for frame in frames:
+                    # Between two frames every object is consistent: the moment to checkpoint.
+                    if stop.requested or checkpoints.due(frame.index):
+                        rows.states.flush()  # poses.csv is flushed row by row
+                        checkpoints.save(frame.index, files, run.saved())
+                        if stop.requested:
+                            return True
+                    if has_depth and frame.ok and frame.depth is None:
+                        run.without_depth.append(frame.index)
+                    _track_frame(frame, run, labels, rows)
+                    rows.bar.update(1)
         except KeyboardInterrupt:  # a second Ctrl-C: the last periodic checkpoint stands
             return True
     return False
@@ -334,16 +336,16 @@ class _Priming:
                           SummaryAccumulator())
         bar = progress_bar(self.recording, self.progress, "learning the noise", counted=False)
         rows = _Rows(Discarded(), NoStates(), None, Muted())
-        frames, begin = self.recording.frames(), None
+        begin = None
         try:
-            for frame in frames:
-                begin = frame.timestamp if begin is None else begin
-                if not primes(frame.timestamp, begin):
-                    break
-                _track_frame(frame, first, self.labels, rows)
-                bar.update(1)
+            with frames_ahead(self.recording) as frames:
+                for frame in frames:
+                    begin = frame.timestamp if begin is None else begin
+                    if not primes(frame.timestamp, begin):
+                        break
+                    _track_frame(frame, first, self.labels, rows)
+                    bar.update(1)
         finally:
-            frames.close()
             bar.close()
         tracker.start_from(first.tracker.learned_noise)
 
