@@ -382,6 +382,8 @@ def better_colour_fit(
         return None
     r = (camera.project(cam_pts) - uvo[vis]) / pixel_sigma
     held = float(np.sum(r * r))
+    if held / 2 <= log_evidence:  # no fit (chi-square >= 0) can beat it by the margin asked
+        return None
     try:
         near = refine_pose(uv, None, camera, layout, R_ch, t_ch, pixel_sigma)
     except InitialisationError:
