@@ -186,10 +186,34 @@ def per_seed(
             results = row.run(camera, hand, detections)
             m = score(results, truth)
             m["recall"] = recall(results, detections, uv, vis)
+            m.update(uncertainty_ratios(results, truth))
             est = [r for r in results if r.has_estimate]
             m["wrong_side"] = float(np.mean([r.side != side for r in est])) if est else 0.0
             per[label].append({**m, **blobs})
     return per
+
+
+def uncertainty_ratios(results: list, truth) -> dict[str, float]:
+    """How honest the reported uncertainty is: the RMS orientation error (deg) over the RMS
+    rot_sigma_deg, and the RMS position error (mm) over the RMS pos_sigma_mm, over the frames
+    with an estimate and a sigma (NaN: none). The sigmas are root-trace 1-sigma values, whose
+    squares are the expected squared errors: 1 is honest, below 1 conservative, above 1
+    overconfident."""
+    R = np.stack([r.R_ch for r in results])
+    t = np.stack([r.t_ch for r in results])
+    rot_sigma = np.array([r.rot_sigma_deg for r in results], dtype=float)
+    pos_sigma = np.array([r.pos_sigma_mm for r in results], dtype=float)
+    n = len(results)
+    ok = (np.isfinite(R).all(axis=(1, 2)) & np.isfinite(t).all(axis=1)
+          & np.isfinite(rot_sigma) & np.isfinite(pos_sigma))
+    if not ok.any():
+        return {"rot_z": float("nan"), "pos_z": float("nan")}
+    rel = np.einsum("nji,njk->nik", R[ok], truth.R_ch[:n][ok])
+    cos = np.clip(0.5 * (np.trace(rel, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+    rot_err = np.degrees(np.arccos(cos))
+    pos_err = 1e3 * np.linalg.norm(t[ok] - truth.t_ch[:n][ok], axis=1)
+    return {"rot_z": _rms(rot_err) / _rms(rot_sigma[ok]),
+            "pos_z": _rms(pos_err) / _rms(pos_sigma[ok])}
 
 
 def _rms(x: np.ndarray) -> float:
@@ -304,9 +328,31 @@ def robustness_sections(
         "",
         *summary_lines(acc),
         "",
+        *uncertainty_table(acc),
         *blob_table(acc),
         *depth_table(acc),
     ]
+
+
+def uncertainty_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
+    """The default tracker's reported uncertainty against its errors (:func:`uncertainty_ratios`),
+    filtered and, for the combined conditions, smoothed."""
+    lines = [
+        "The uncertainty poses.csv reports (rot_sigma_deg, pos_sigma_mm: root-trace 1 sigma) "
+        "against the errors: RMS error / RMS reported sigma, mean over the seeds. 1 is honest, "
+        "below 1 conservative (the errors are smaller than reported), above 1 overconfident.",
+        "",
+        "| condition | orientation, filtered | smoothed | position, filtered | smoothed |",
+        "|---|---|---|---|---|",
+    ]
+    for condition, rows in acc.items():
+        m, sm = rows.get("default"), rows.get(SMOOTHED, {})
+        if m is None or "rot_z" not in m:
+            continue
+        cells = [_f(m["rot_z"], ".2f"), _f(sm.get("rot_z", np.nan), ".2f"),
+                 _f(m["pos_z"], ".2f"), _f(sm.get("pos_z", np.nan), ".2f")]
+        lines.append(f"| {condition} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
 
 
 def blob_table(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:

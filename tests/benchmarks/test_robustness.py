@@ -17,7 +17,9 @@ from benchmarks.robustness import (
     robustness,
     robustness_sections,
     summary_lines,
+    uncertainty_ratios,
 )
+from wristtrack.geometry import so3_exp
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 
 
@@ -132,6 +134,27 @@ def test_depth_errors_against_hand_built_truth():
                         525.0, 525.0) == {}
 
 
+def test_uncertainty_ratios_against_hand_derived_errors():
+    """Every frame 1 deg and 3 mm off, reported at 2 deg and 1 mm: 0.5 (conservative) and 3
+    (overconfident); frames without an estimate or a sigma do not count."""
+    n = 5
+    true_R = np.stack([so3_exp(np.array([0.1 * k, 0.2, 0.0])) for k in range(n)])
+    true_t = np.tile([0.0, 0.0, 0.6], (n, 1))
+    truth = SimpleNamespace(R_ch=true_R, t_ch=true_t)
+    off = so3_exp(np.radians([0.0, 0.0, 1.0]))
+    results = [SimpleNamespace(R_ch=true_R[k] @ off, t_ch=true_t[k] + [0.003, 0.0, 0.0],
+                               rot_sigma_deg=2.0, pos_sigma_mm=1.0) for k in range(n)]
+    results[1] = SimpleNamespace(R_ch=np.full((3, 3), np.nan), t_ch=np.full(3, np.nan),
+                                 rot_sigma_deg=np.nan, pos_sigma_mm=np.nan)
+    results[2] = SimpleNamespace(R_ch=true_R[2] @ off, t_ch=true_t[2] + 1.0,  # no sigma
+                                 rot_sigma_deg=np.nan, pos_sigma_mm=np.nan)
+    z = uncertainty_ratios(results, truth)
+    assert z["rot_z"] == pytest.approx(0.5, rel=1e-9)
+    assert z["pos_z"] == pytest.approx(3.0, rel=1e-9)
+    none = uncertainty_ratios(results[1:2], truth)
+    assert np.isnan(none["rot_z"]) and np.isnan(none["pos_z"])
+
+
 def test_every_effect_has_a_condition_and_the_combined_ones_exist():
     alone = {tuple(c.get("effects", ())) for c in CONDITIONS.values()}
     for e in EFFECTS:
@@ -149,6 +172,9 @@ def test_one_condition_end_to_end(tmp_path):
     lines = robustness_sections(tmp_path, n_frames=15, conditions=("clean",),
                                 trackers={"default": DEFAULT})
     assert any(line.startswith("| clean | default |") for line in lines)
+    # the reported uncertainty against the errors, filtered (no smoothed row for one effect)
+    assert np.isfinite(m["rot_z"]) and np.isfinite(m["pos_z"])
+    assert f"| clean | {m['rot_z']:.2f} | n/a | {m['pos_z']:.2f} | n/a |" in lines
     # the detector's own table: sharp blobs, every marker found
     assert m["blob_found"] == 1.0 and m["blob_rms"] < 0.1
     assert any(line.startswith("| clean | 0.0") for line in lines)
