@@ -48,9 +48,9 @@ def online(factory: Callable[[Camera, HandLayout], object]) -> Runner:
 def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list[Detections],
                      config: TrackerConfig | None = None) -> tuple[Tracker, list[FrameResult]]:
     """The default tracker (or one of ``config``) stepped through ``detections`` as
-    ``wristtrack track`` runs it (pipeline/track.py; here on the same detections): without a
-    layout, a first pass surveys it over the recording and a second tracks with it; the pass
-    that tracks starts from the noise a pass over the first PRIMING_S learned
+    ``wristtrack track`` runs it (pipeline/track.py, priming.py; here on the same detections):
+    without a layout, a first pass surveys it over the recording and a second tracks with it;
+    the pass that tracks starts from the noise a pass over the first PRIMING_S learned
     (TrackerConfig.prime_noise). The last pass's tracker and results."""
     config = TrackerConfig() if config is None else config
     if layout is None:

@@ -147,7 +147,8 @@ def detection_ms(recording_dir: Path) -> tuple[float, float]:
 def throughput(recording_dir: Path, work: Path, repeats: int = 3) -> tuple[float, float, float]:
     """Frames per second of decoding the PNG folder alone, of the whole ``track`` without the
     noise's priming (every frame read once: the pipeline's own pace) and of the whole ``track``
-    as it runs by default (its first 10 s read twice to prime the noise, pipeline/track.py)."""
+    as it runs by default (its first 10 s tracked twice to prime the noise,
+    pipeline/priming.py)."""
     decode, once, primed = [], [], []
     for k in range(repeats):
         with open_recording(recording_dir) as recording:
@@ -314,10 +315,10 @@ def pipeline_sections(
         f"- `track` on the 640x480 PNG folder of `deviation`: {track:.0f} frames/s against "
         f"{decode:.0f} frames/s for merely decoding the same PNGs: **{track / decode:.0%} of "
         "decode-only throughput** (target >= 50%), every frame read once "
-        "(`--no-prime-noise`). By default `track` first reads the first 10 s to prime the "
+        "(`--no-prime-noise`). By default `track` first tracks the first 10 s to prime the "
         f"noise: {primed:.0f} frames/s over this recording of {frames} frames, priming "
-        "included (all of it is read twice); a recording longer than 10 s pays it once, for "
-        "its first 10 s.",
+        "included (all of it is tracked twice, read and detected once); a recording longer "
+        "than 10 s pays it once, for its first 10 s.",
         f"- `track` on an MP4 of the same colour frames (OpenCV's mp4v encoder, RGB only, "
         f"read through `wristtrack.io.video`): {mp4_track:.0f} frames/s against "
         f"{mp4_decode:.0f} frames/s decoding the MP4 alone: **{mp4_track / mp4_decode:.0%} of "

@@ -3,9 +3,10 @@ checker and the browser used by the page tests."""
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -74,7 +75,8 @@ def chromium() -> str:
 
 def _interrupt_at(recording, index: int, nth: int = 1) -> None:
     """Make ``recording`` deliver a real SIGINT to this process as frame ``index`` is read for
-    the ``nth`` time (a run reads its first seconds twice: once to prime the noise)."""
+    the ``nth`` time (a run without hand.json reads it in each of its two passes). The frames
+    are read ahead of the run (io/prefetch.py): it stops at most a few frames before."""
     frames = recording.frames
     reads = [0]
 
@@ -87,6 +89,24 @@ def _interrupt_at(recording, index: int, nth: int = 1) -> None:
             yield frame
 
     recording.frames = interrupted
+
+
+@contextlib.contextmanager
+def _briefly_primed(seconds: float = 0.3) -> Iterator[None]:
+    from wristtrack.tracking import noise_scale
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(noise_scale, "PRIMING_S", seconds)
+        yield
+
+
+@pytest.fixture(scope="session")
+def briefly_primed() -> Callable:
+    """``with briefly_primed():`` track primes the noise over the first 0.3 s only, not 10 s.
+    A run writes its first PRIMING_S once they have primed it, and a Ctrl-C stops it only
+    after them (pipeline/priming.py): a test that interrupts a short recording part-way needs
+    them short. In this process only (not in `wristtrack` children)."""
+    return _briefly_primed
 
 
 @pytest.fixture(scope="session")

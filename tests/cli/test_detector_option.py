@@ -16,6 +16,13 @@ from wristtrack.pipeline.track import track_recording
 ARGS = ("--no-progress", "--no-report")
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _brief_priming(briefly_primed):
+    """Interrupts part-way need a priming shorter than these recordings (conftest)."""
+    with briefly_primed():
+        yield
+
+
 @pytest.fixture(scope="module")
 def rec(rendered):
     return rendered("reach", seed=0, n_frames=40)  # shared with the report tests

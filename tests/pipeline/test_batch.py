@@ -88,7 +88,8 @@ def test_batch_on_a_dask_local_cluster_isolates_the_broken_recordings(study, tmp
     assert not (out / ".hidden").exists()
 
 
-def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, capsys, interrupt_at):
+def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, capsys, interrupt_at,
+                                                             briefly_primed):
     out = tmp_path / "out"
     code = main(["batch", str(study), "--out", str(out), "--workers", "2", "--no-progress"])
     lines = capsys.readouterr().out.strip().splitlines()
@@ -100,7 +101,7 @@ def test_batch_on_a_local_pool_then_rerun_skips_and_resumes(study, tmp_path, cap
 
     # one run interrupted part-way (a real SIGINT at frame 9), one run tracked already
     name = GOOD[0]
-    with open_recording(study / name) as recording:
+    with open_recording(study / name) as recording, briefly_primed():
         interrupt_at(recording, 9)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out / name, progress=False, checkpoint_every=4)

@@ -20,6 +20,13 @@ from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE, CheckpointMismatch
 from wristtrack.pipeline.track import track_recording
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _brief_priming(briefly_primed):
+    """Interrupts part-way need a priming shorter than these recordings (conftest)."""
+    with briefly_primed():
+        yield
+
+
 @pytest.fixture(scope="module")
 def rec(rendered):
     folder = rendered("no_hand", seed=11, duration=3.0)

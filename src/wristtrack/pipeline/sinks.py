@@ -9,7 +9,7 @@ from wristtrack.io.base import Recording
 
 
 class Discarded:
-    """poses.csv of the priming pass (track._Priming): kept nowhere."""
+    """poses.csv of the priming pass (pipeline/priming.py): kept nowhere."""
 
     def write(self, row) -> None:
         pass
@@ -20,7 +20,7 @@ class Discarded:
 
 class Muted:
     """The priming pass's lines about its frames (a frame skipped): said by the run itself,
-    which reads the same frames again."""
+    which tracks the same frames again."""
 
     def write(self, line: str, file=None) -> None:
         pass

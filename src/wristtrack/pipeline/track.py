@@ -2,14 +2,16 @@
 
 Frames stream from the reader through the detector and the tracker to the writer, so memory
 stays flat however long the recording, and every processed frame is on disk as soon as it is
-done: an interrupted run keeps what it computed.
+done: an interrupted run keeps what it computed. The first seconds are the exception: their
+detections are held until they have primed the noise (pipeline/priming.py), then tracked and
+written.
 """
 
 from __future__ import annotations
 
 import math
 import sys
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,15 +23,16 @@ from wristtrack.detect.config import DetectorConfig, detector_config
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import InitialisationError, InputError
 from wristtrack.io.atomic import write_json_atomic
-from wristtrack.io.base import Frame, Recording
-from wristtrack.io.poses import PosesWriter, pose_row
+from wristtrack.io.base import Recording
+from wristtrack.io.poses import PosesWriter
 from wristtrack.io.prefetch import frames_ahead
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
-from wristtrack.pipeline.colours import follow_colours
+from wristtrack.pipeline.frame_step import Rows, RunState, track_frame
 from wristtrack.pipeline.interrupt import DeferredInterrupt
-from wristtrack.pipeline.sinks import Discarded, Muted, NoStates, progress_bar
+from wristtrack.pipeline.priming import Priming
+from wristtrack.pipeline.sinks import NoStates, progress_bar
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.pipeline.surveyed import (
     hand_of,
@@ -38,14 +41,10 @@ from wristtrack.pipeline.surveyed import (
     second_pass_begun,
 )
 from wristtrack.tracking.layout_survey import RunSurvey
-from wristtrack.tracking.noise_scale import primes
-from wristtrack.tracking.tracker import FrameResult, Status, Tracker, TrackerConfig
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 if TYPE_CHECKING:
     from wristtrack.pipeline.label import ManualLabels
-
-_NAN3 = np.full(3, np.nan)
-_NAN33 = np.full((3, 3), np.nan)
 
 
 def track_recording(
@@ -78,7 +77,8 @@ def track_recording(
     (hand.json's format, for the same subject's other recordings); the second tracks with it.
     A live camera cannot be read twice and is tracked once.
 
-    Interrupted runs: Ctrl-C or SIGTERM stops at the end of the frame being processed, saves a
+    Interrupted runs: Ctrl-C or SIGTERM stops at the end of the frame being processed (in the
+    first seconds, once they have primed the noise and are tracked), saves a
     checkpoint (see :mod:`wristtrack.pipeline.checkpoint`; also saved every
     ``checkpoint_every`` frames or 30 s, so a SIGKILL loses little), writes summary.json with
     ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
@@ -145,7 +145,7 @@ class _Passes:
         # (one with a fingerprint: not a live camera)
         primed = (self.config.primes_noise and survey is None and not resume
                   and fingerprint is not None)
-        prime = _Priming(recording, self.config, self.detector_settings, labels,
+        prime = Priming(recording, self.config, self.detector_settings, labels,
                          self.progress) if primed else None
         bar = progress_bar(recording, self.progress,
                            "surveying the hand" if survey else "tracking")
@@ -154,7 +154,7 @@ class _Passes:
         states = _state_writer(out, run.tracker, resume) if smooth else NoStates()
         files = [out / "poses.csv"] + ([out / STATES_FILE] if smooth else [])
         with PosesWriter(out / "poses.csv", append=resume) as writer, states:
-            rows = _Rows(writer, states, overlay, bar)
+            rows = Rows(writer, states, overlay, bar)
             try:
                 interrupted = _frame_loop(recording, start, run, labels, rows, checkpoints,
                                           files, prime)
@@ -165,26 +165,6 @@ class _Passes:
 
 
 # ------------------------------------------------------------------------------ opening
-
-
-@dataclass
-class _RunState:
-    """What a run carries from one frame to the next: exactly what a checkpoint saves."""
-
-    detector: MarkerDetector
-    tracker: Tracker
-    summary: SummaryAccumulator
-    learned: bool = False  # the detector's colours were refined at the first fix
-    bad_frames: list[dict[str, Any]] = field(default_factory=list)  # for summary.json
-    # frames of a recording with depth that came without (a lost depth frame, or one not of
-    # their moment: io.base.pairing_tolerance), tracked on colour alone; for summary.json
-    without_depth: list[int] = field(default_factory=list)
-    survey: RunSurvey | None = None  # a first pass's survey of the layout
-
-    def saved(self) -> dict[str, Any]:
-        return {"detector": self.detector, "tracker": self.tracker, "summary": self.summary,
-                "learned": self.learned, "bad_frames": self.bad_frames,
-                "without_depth": self.without_depth, "survey": self.survey}
 
 
 def _output_folder(out: str | Path) -> Path:
@@ -207,7 +187,7 @@ def _open_run(
     fingerprint: dict[str, Any] | None,
     resume: bool,
     survey: RunSurvey | None = None,
-) -> tuple[_RunState, int]:
+) -> tuple[RunState, int]:
     """The state to start from and the index of the first frame: a fresh run (a previous
     run's checkpoint and summary removed), or the checkpoint's, with the output files cut back
     to it (rows written after the checkpoint are redone). ``survey`` follows a first pass's
@@ -215,11 +195,11 @@ def _open_run(
     if not resume:
         ckpt.clear_stale(out)
         tracker = Tracker(recording.camera, recording.hand, config)
-        return (_RunState(MarkerDetector(recording.camera, detector), tracker,
+        return (RunState(MarkerDetector(recording.camera, detector), tracker,
                           SummaryAccumulator(), survey=survey), 0)
     saved = ckpt.load_checkpoint(out, fingerprint)
     ckpt.truncate_outputs(out, saved)
-    run = _RunState(**saved.state)
+    run = RunState(**saved.state)
     if survey is not None and run.survey is not None:
         survey.__dict__.update(run.survey.__dict__)  # the caller's object holds the survey
     run.survey = survey
@@ -229,43 +209,25 @@ def _open_run(
 # ---------------------------------------------------------------------------- frame loop
 
 
-@dataclass
-class _Rows:
-    """Where each frame's outcome goes: its poses.csv row, its filter state (for --smooth),
-    the overlay video, the progress bar."""
-
-    writer: PosesWriter
-    states: StateWriter | NoStates
-    overlay: Any
-    bar: Any
-
-    def skipped(self, index: int, timestamp: float, n_blobs: int, status: str) -> None:
-        self.writer.write(skipped_row(index, timestamp, n_blobs, status))
-        self.states.write(index, timestamp, None)
-
-    def tracked(self, index: int, timestamp: float, result: FrameResult) -> None:
-        self.writer.write_result(result)
-        self.states.write(index, timestamp, result)
-
-
 def _frame_loop(
     recording: Recording,
     start: int,
-    run: _RunState,
+    run: RunState,
     labels: Any,
-    rows: _Rows,
+    rows: Rows,
     checkpoints: ckpt.Checkpointer,
     files: list[Path],
-    prime: _Priming | None = None,
+    prime: Priming | None = None,
 ) -> bool:
-    """Track the frames of ``recording`` from ``start`` one by one, after ``prime`` has primed
-    the tracker; True if the run was interrupted (Ctrl-C, SIGTERM)."""
+    """Track the frames of ``recording`` from ``start`` one by one (the first seconds through
+    ``prime``, which primes the tracker on them); True if the run was interrupted (Ctrl-C,
+    SIGTERM)."""
     has_depth = recording.has_depth
     with DeferredInterrupt() as stop:
         try:
-            if prime is not None:
-                prime(run.tracker)
             with frames_ahead(recording, start) as frames:
+                if prime is not None:
+                    frames = prime(frames, run, rows)
                 for frame in frames:
                     # Between two frames every object is consistent: the moment to checkpoint.
                     if stop.requested or checkpoints.due(frame.index):
@@ -275,79 +237,11 @@ def _frame_loop(
                             return True
                     if has_depth and frame.ok and frame.depth is None:
                         run.without_depth.append(frame.index)
-                    _track_frame(frame, run, labels, rows)
+                    track_frame(frame, run, labels, rows)
                     rows.bar.update(1)
         except KeyboardInterrupt:  # a second Ctrl-C: the last periodic checkpoint stands
             return True
     return False
-
-
-def _track_frame(frame: Frame, run: _RunState, labels: Any, rows: _Rows) -> None:
-    """One frame: detect, track, write its row. An unreadable frame, or one the tracker
-    refuses (a timestamp going backwards), is noted and written as a skipped row."""
-    if frame.error is not None:
-        _note_bad(rows.bar, run.bad_frames, frame.index, frame.error)
-        rows.skipped(frame.index, frame.timestamp, 0, "bad_frame")
-        return
-    det = run.detector.detect(frame.bgr, frame.depth, frame.timestamp)
-    manual = _frame_labels(labels, frame.index, det) if not run.learned else None
-    try:
-        result = run.tracker.step(det, manual)
-    except InputError as exc:
-        _note_bad(rows.bar, run.bad_frames, frame.index, str(exc))
-        rows.skipped(frame.index, frame.timestamp, det.count, "skipped")
-        if rows.overlay is not None:
-            rows.overlay.add(frame.bgr, det, None)
-        return
-    if manual is not None and result.status != Status.TRACKING:
-        raise InitialisationError(
-            f"the manual labels of frame {frame.index} do not initialise the tracker; "
-            "check them with `wristtrack label INPUT --labels FILE --check`"
-        )
-    if result.frame != frame.index:  # after skipped frames: the recording's numbers
-        result = replace(result, frame=frame.index)
-    run.learned = follow_colours(run.detector, frame.bgr, det, result, frame.index, run.learned)
-    if run.survey is not None:
-        run.survey.add(run.tracker, det, result)
-    rows.tracked(frame.index, frame.timestamp, result)
-    if rows.overlay is not None:
-        rows.overlay.add(frame.bgr, det, result)
-    run.summary.add(result)
-
-
-@dataclass
-class _Priming:
-    """A first pass over the recording's first PRIMING_S that learns its markers' noise for
-    the run to start from (TrackerConfig.prime_noise): a fresh detector and tracker, their rows
-    discarded. Its frames are read, detected and tracked again by the run."""
-
-    recording: Recording
-    config: TrackerConfig
-    detector: DetectorConfig
-    labels: Any
-    progress: bool
-
-    def __call__(self, tracker: Tracker) -> None:
-        """Prime ``tracker`` (fresh). A Ctrl-C meanwhile stops the run once it is primed
-        (a few seconds at most), so that its checkpoint resumes as the whole run would have
-        gone; a second one stops at once, without a checkpoint."""
-        first = _RunState(MarkerDetector(self.recording.camera, self.detector),
-                          Tracker(self.recording.camera, self.recording.hand, self.config),
-                          SummaryAccumulator())
-        bar = progress_bar(self.recording, self.progress, "learning the noise", counted=False)
-        rows = _Rows(Discarded(), NoStates(), None, Muted())
-        begin = None
-        try:
-            with frames_ahead(self.recording) as frames:
-                for frame in frames:
-                    begin = frame.timestamp if begin is None else begin
-                    if not primes(frame.timestamp, begin):
-                        break
-                    _track_frame(frame, first, self.labels, rows)
-                    bar.update(1)
-        finally:
-            bar.close()
-        tracker.start_from(first.tracker.learned_noise)
 
 
 # ------------------------------------------------------------------------------ finishing
@@ -356,7 +250,7 @@ class _Priming:
 def _finish(
     recording: Recording,
     out: Path,
-    run: _RunState,
+    run: RunState,
     config: TrackerConfig,
     settings: dict[str, Any],
     smooth: bool,
@@ -411,26 +305,6 @@ def _smoothed_summary(out: Path, tracker: Tracker, config: TrackerConfig) -> Sum
 # -------------------------------------------------------------------------------- helpers
 
 
-def _frame_labels(labels: Any, index: int, det) -> np.ndarray | None:
-    """Manual labels for this frame's blobs, or None: the tracker labels them itself."""
-    if labels is not None and hasattr(labels, "for_frame"):  # label.ManualLabels
-        return labels.for_frame(index, det)
-    return labels if index == 0 else None  # an array names the first frame's blobs
-
-
-MAX_BAD_FRAME_LINES = 10  # bad frames reported on stderr; all of them are in summary.json
-
-
-def _note_bad(bar, bad_frames: list[dict[str, Any]], index: int, error: str) -> None:
-    """Record a skipped frame for summary.json and say so on stderr (the first few)."""
-    bad_frames.append({"frame": index, "error": error})
-    if len(bad_frames) <= MAX_BAD_FRAME_LINES:
-        bar.write(f"wristtrack: frame {index} skipped: {error}", file=sys.stderr)
-    if len(bad_frames) == MAX_BAD_FRAME_LINES + 1:
-        bar.write("wristtrack: more frames skipped; summary.json lists every one "
-                  "(skipped_frames)", file=sys.stderr)
-
-
 def no_initialisation_message(recording: Recording, n_frames: int, tracker: Tracker) -> str:
     """Why no frame of the run gave a first pose, in one line."""
     reason = tracker.last_init_error or "no frame could be read"
@@ -443,13 +317,6 @@ def no_initialisation_message(recording: Recording, n_frames: int, tracker: Trac
     return (
         f"no frame of {recording.source} could be initialised (none of {n_frames} frames gave "
         f"a pose): {reason}; poses.csv and summary.json record the frames"
-    )
-
-
-def skipped_row(index: int, timestamp: float, n_blobs: int, status: str) -> list[str]:
-    return pose_row(
-        index, timestamp, status, R_ch=_NAN33, t_ch=_NAN3, R=_NAN33, p=_NAN3, v=_NAN3, w=_NAN3,
-        n_visible=0, n_clutter=n_blobs,
     )
 
 

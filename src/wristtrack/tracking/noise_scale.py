@@ -36,9 +36,10 @@ soft-tissue recordings, whose slide is the model's): 0.34 deg there, 0.33 with t
 
 Learned as the recording goes, all of this arrives late: the first seconds were tracked at the
 model's pixel noise, then at the first windows' guesses (pixel_noise.py), with a long shutter's
-blur until the frames had moved, and the slide at the model's. Offline, a recording can be read
-twice, so `track` primes the tracker (``LearnedNoise.carried_over``, ``Tracker.start_from``):
-a first pass over the first PRIMING_S learns the noise and the run starts from it. Rendered
+blur until the frames had moved, and the slide at the model's. Offline, the first seconds can
+be tracked twice, so `track` primes the tracker (``LearnedNoise.carried_over``,
+``Tracker.start_from``; pipeline/priming.py): a first pass over the first PRIMING_S learns the
+noise and the run starts from it, on the same detections. Rendered
 still start and one reach, 4 seeds each, orientation RMSE: clean 0.179 -> 0.147 deg,
 1/30 s shutter 0.205 -> 0.170, structured-light depth 0.333 -> 0.270; every effect at once
 level (0.554 -> 0.564), whose blobs reach the model's sigma anyway. A live camera is read once

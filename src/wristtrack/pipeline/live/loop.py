@@ -42,12 +42,9 @@ from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.pipeline.colours import learn_colours
+from wristtrack.pipeline.frame_step import skipped_row
 from wristtrack.pipeline.interrupt import DeferredInterrupt
-from wristtrack.pipeline.track import (
-    no_initialisation_message,
-    settings_dict,
-    skipped_row,
-)
+from wristtrack.pipeline.track import no_initialisation_message, settings_dict
 from wristtrack.tracking import compiled
 from wristtrack.tracking.layout_survey import RunSurvey
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
