@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, Row, recorded_detections, score
+from wristtrack.geometry import rotation_distance
 from wristtrack.hand import MARKER_NAMES
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
 from wristtrack.sim.render import render_recording
@@ -208,9 +209,7 @@ def uncertainty_ratios(results: list, truth) -> dict[str, float]:
           & np.isfinite(rot_sigma) & np.isfinite(pos_sigma))
     if not ok.any():
         return {"rot_z": float("nan"), "pos_z": float("nan")}
-    rel = np.einsum("nji,njk->nik", R[ok], truth.R_ch[:n][ok])
-    cos = np.clip(0.5 * (np.trace(rel, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-    rot_err = np.degrees(np.arccos(cos))
+    rot_err = np.degrees(rotation_distance(R[ok], truth.R_ch[:n][ok]))
     pos_err = 1e3 * np.linalg.norm(t[ok] - truth.t_ch[:n][ok], axis=1)
     return {"rot_z": _rms(rot_err) / _rms(rot_sigma[ok]),
             "pos_z": _rms(pos_err) / _rms(pos_sigma[ok])}

@@ -20,7 +20,7 @@ from wristtrack.io.base import Frame
 from wristtrack.io.poses import PosesWriter, pose_row
 from wristtrack.io.states import StateWriter
 from wristtrack.pipeline.colours import follow_colours
-from wristtrack.pipeline.sinks import NoStates
+from wristtrack.pipeline.sinks import Discarded, NoStates
 from wristtrack.tracking.layout_survey import RunSurvey
 from wristtrack.tracking.tracker import FrameResult, Status, Tracker
 
@@ -53,7 +53,7 @@ class Rows:
     """Where each frame's outcome goes: its poses.csv row, its filter state (for --smooth),
     the overlay video, the progress bar."""
 
-    writer: PosesWriter | Any
+    writer: PosesWriter | Discarded
     states: StateWriter | NoStates
     overlay: Any
     bar: Any
@@ -113,6 +113,12 @@ def track_detections(index: int, timestamp: float, det: Detections, run: RunStat
     if rows.overlay is not None and bgr is not None:
         rows.overlay.add(bgr, det, result)
     run.summary.add(result)
+
+
+def came_without_depth(frame: Frame, has_depth: bool) -> bool:
+    """A readable frame of a recording with depth (``has_depth``) that came without its depth:
+    tracked on colour alone, and listed in summary.json."""
+    return has_depth and frame.ok and frame.depth is None
 
 
 def frame_labels(labels: Any, index: int, det) -> np.ndarray | None:

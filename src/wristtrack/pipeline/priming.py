@@ -21,7 +21,14 @@ from wristtrack.detect.config import DetectorConfig
 from wristtrack.detect.detections import Detections
 from wristtrack.detect.detector import MarkerDetector
 from wristtrack.io.base import Frame, Recording
-from wristtrack.pipeline.frame_step import Rows, RunState, note_bad, track_detections, track_frame
+from wristtrack.pipeline.frame_step import (
+    Rows,
+    RunState,
+    came_without_depth,
+    note_bad,
+    track_detections,
+    track_frame,
+)
 from wristtrack.pipeline.sinks import Discarded, Muted, NoStates, progress_bar
 from wristtrack.tracking.noise_scale import primes
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
@@ -92,7 +99,7 @@ class Priming:
                     break
                 det = track_frame(frame, first, self.labels, quiet)
                 held.append(_Detected(frame.index, frame.timestamp, det, frame.error,
-                                      has_depth and frame.ok and frame.depth is None,
+                                      came_without_depth(frame, has_depth),
                                       frame.bgr if keep_bgr and frame.ok else None))
                 size += held[-1].nbytes
                 bar.update(1)

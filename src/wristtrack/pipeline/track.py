@@ -29,7 +29,7 @@ from wristtrack.io.prefetch import frames_ahead
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.io.states import STATES_FILE, StateWriter
 from wristtrack.pipeline import checkpoint as ckpt
-from wristtrack.pipeline.frame_step import Rows, RunState, track_frame
+from wristtrack.pipeline.frame_step import Rows, RunState, came_without_depth, track_frame
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.priming import Priming
 from wristtrack.pipeline.sinks import NoStates, progress_bar
@@ -235,7 +235,7 @@ def _frame_loop(
                         checkpoints.save(frame.index, files, run.saved())
                         if stop.requested:
                             return True
-                    if has_depth and frame.ok and frame.depth is None:
+                    if came_without_depth(frame, has_depth):
                         run.without_depth.append(frame.index)
                     track_frame(frame, run, labels, rows)
                     rows.bar.update(1)

@@ -28,7 +28,7 @@ class TrackerConfig:
     adapt_slide: bool = True
     adapt_pixel: bool = True
     # Offline, what is learned is primed: a first pass over the recording's first seconds
-    # learns it, and the run starts from there (pipeline/track.py, noise_scale.PRIMING_S)
+    # learns it, and the run starts from there (pipeline/priming.py, noise_scale.PRIMING_S)
     # rather than from the model's noise, which left a recording's still start and first
     # movement to the depth and to a long shutter's blur. A live camera cannot be read twice:
     # it learns from its first frame on, as with False.

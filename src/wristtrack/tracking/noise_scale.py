@@ -78,7 +78,7 @@ MIN_MARKERS = 4  # fewer labelled markers hardly separate a slide from the pose
 # (a flexion cycle, the light), not from frame to frame.
 SCORE_INTERVAL_S = 0.25
 # Offline, a run starts from the noise an earlier pass learned over the recording's first
-# PRIMING_S (pipeline/track.py): the longest memory of what is learned, the blob errors'
+# PRIMING_S (pipeline/priming.py): the longest memory of what is learned, the blob errors'
 # correlation's (pixel_noise.TIME_CONSTANT_S); a longer start would add little to it.
 PRIMING_S = pixel_noise.TIME_CONSTANT_S
 

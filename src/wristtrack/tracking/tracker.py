@@ -123,7 +123,7 @@ class Tracker:
 
     def start_from(self, learned: noise_scale.LearnedNoise) -> None:
         """Before the first frame: start from what an earlier pass over this recording learned
-        of its markers' noise (``LearnedNoise.carried_over``; pipeline/track.py primes so)."""
+        of its markers' noise (``LearnedNoise.carried_over``; pipeline/priming.py primes so)."""
         self.learned_noise = learned.carried_over()
         self.learned_noise.scale_model(self.model)
         self._obs, self._compiled = {}, None

@@ -42,7 +42,7 @@ from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.io.run_folder import SURVEYED_HAND
 from wristtrack.pipeline.colours import learn_colours
-from wristtrack.pipeline.frame_step import skipped_row
+from wristtrack.pipeline.frame_step import came_without_depth, skipped_row
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.track import no_initialisation_message, settings_dict
 from wristtrack.tracking import compiled
@@ -305,7 +305,7 @@ def track_live(
                     log.bad.append(frame.index)
                     skipped.append({"frame": frame.index, "error": frame.error})
                     continue
-                if source.has_depth and frame.depth is None:
+                if came_without_depth(frame, source.has_depth):
                     log.without_depth.append(frame.index)
                 det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
                 try:
