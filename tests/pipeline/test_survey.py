@@ -5,7 +5,6 @@ it. Truth: the renderer's hand (the default layout) and poses; an uninterrupted 
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 
@@ -85,26 +84,12 @@ def test_a_recording_with_hand_json_is_tracked_once(rec, tmp_path):
     assert not (out / SURVEYED_HAND).exists()
 
 
-def _interrupt_on_read(recording, index: int, nth: int) -> None:
-    """A real Ctrl-C the ``nth`` time frame ``index`` is read (2: in the second pass)."""
-    frames, seen = recording.frames, [0]
-
-    def interrupted(start=0):
-        for frame in frames(start):
-            if frame.index == index:
-                seen[0] += 1
-                if seen[0] == nth:
-                    signal.raise_signal(signal.SIGINT)
-            yield frame
-
-    recording.frames = interrupted
-
-
 @pytest.mark.parametrize("nth", [1, 2], ids=["first pass", "second pass"])
-def test_an_interrupted_survey_resumes_to_the_uninterrupted_result(rec, runs, tmp_path, nth):
+def test_an_interrupted_survey_resumes_to_the_uninterrupted_result(rec, runs, tmp_path, nth,
+                                                                   interrupt_at):
     out = tmp_path / "run"
     with open_recording(rec) as recording:
-        _interrupt_on_read(recording, 40, nth)
+        interrupt_at(recording, 40, nth)  # nth 2: in the second pass
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out, progress=False, checkpoint_every=15)
     assert (out / CHECKPOINT_FILE).is_file()
@@ -132,10 +117,11 @@ def test_a_run_stopped_between_the_passes_resumes_with_the_second(rec, runs, tmp
     assert (out / "poses.csv").read_bytes() == (runs["surveyed"] / "poses.csv").read_bytes()
 
 
-def test_resuming_the_second_pass_with_no_survey_is_refused_and_keeps_it(rec, runs, tmp_path):
+def test_resuming_the_second_pass_with_no_survey_is_refused_and_keeps_it(rec, runs, tmp_path,
+                                                                        interrupt_at):
     out = tmp_path / "run"
     with open_recording(rec) as recording:
-        _interrupt_on_read(recording, 40, 2)
+        interrupt_at(recording, 40, 2)
         with pytest.raises(KeyboardInterrupt):
             track_recording(recording, out, progress=False, checkpoint_every=15)
     with open_recording(rec) as recording, pytest.raises(CheckpointMismatch,
