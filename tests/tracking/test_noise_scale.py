@@ -70,6 +70,35 @@ def test_the_factor_settles_where_the_innovations_were_drawn(true_factor):
     assert scale.factor == pytest.approx(expected, rel=0.1, abs=0.003)
 
 
+def test_a_slide_that_starts_is_taken_up_from_the_floor():
+    """Fingers still, then moving: innovations without the slide run the factor down to below a
+    thirtieth of the slide's sigma (a thousandth of its variance) in 20 s; drawn with the full
+    slide after that, the factor is back at half of it within 6 s of scored
+    frames (0.25 s apart), at the module's memory."""
+    rng = np.random.default_rng(2)
+    m = 12
+    A = _spd(rng, m, 0.2)
+    G = rng.normal(size=(m, 3)) * 0.8
+    B = G @ G.T
+    scale = VarianceFactor()
+
+    def update(L: np.ndarray) -> None:
+        nu = L @ rng.normal(size=m)
+        Si = np.linalg.inv(A + scale.factor * B)
+        scale.update((float(nu @ Si @ B @ Si @ nu), float(np.trace(Si @ B))), 0.25)
+
+    still = np.linalg.cholesky(A)
+    for _ in range(240):
+        update(still)
+    assert scale.factor < 1e-3
+    moving = np.linalg.cholesky(A + B)
+    updates = 0
+    while scale.factor < 0.5:
+        update(moving)
+        updates += 1
+        assert updates * 0.25 <= 10.0, f"factor {scale.factor:.4f} after {updates} updates"
+
+
 def test_scores_that_say_nothing_change_nothing():
     scale = VarianceFactor()
     assert not scale.update(None, 0.3)

@@ -64,9 +64,16 @@ from wristtrack.tracking.slide_model import SlidingSkinModel
 TIME_CONSTANT_S = 2.0
 # The model's own value counts as this much evidence (a frame gives tr(S^-1 B) of up to ~3).
 PRIOR_WEIGHT = 3.0
-# Guard rails on the slide's sigma, as a factor on the model's: a tenth (no slide is ever
-# ruled out) to twice it.
-SD_FACTOR_RANGE = (0.1, 2.0)
+# Guard rails on the slide's sigma, as a factor on the model's: a hundredth to twice it. A hand
+# whose fingers stay still runs the factor down (to about 0.01-0.04 of the sigma within a
+# minute), and it climbs back as soon as the fingers move, about as fast as from the old floor
+# of a tenth (half a full slide in 5.5-9.5 s against 4.3-6.8: test_noise_scale). That tenth kept
+# 0.2 mm of slide modelled on rigid hands, and what it took from the pixels' evidence about a
+# tilt cost them (rendered, 3-4 seeds, orientation RMSE): clean 0.132 -> 0.124 deg,
+# structured-light depth 0.227 -> 0.201, Bayer 0.230 -> 0.224; the still start and reach
+# 0.147 -> 0.137 clean, 0.270 -> 0.252 structured light; skin that slides (soft tissue alone,
+# every effect at once) unchanged.
+SD_FACTOR_RANGE = (0.01, 2.0)
 # A slide the state carries (tracking/slide_model.py) is measured as if it were not (its
 # spread against the layout, ``MarkerObservation.as_rigid``), where the prior follows part of
 # it: the factor comes out at 0.55-0.8 of a slide's own sigma (this module's doc). The state's
