@@ -179,3 +179,16 @@ def test_frames_without_depth_are_tracked_on_colour_and_listed(recordings, tmp_p
     for angle in ("deviation_deg", "flexion_deg", "pronation_deg"):
         assert np.abs(poses[angle][30:33] - truth[angle][30:33]).max() < 1.0
     assert _track(rec, tmp_path / "whole")["frames_without_depth"] == []
+
+
+def test_evaluate_says_what_is_missing_in_one_line(tmp_path, capsys):
+    """A folder that is no run (none there, no poses.csv in it) gets the run folder's one-line
+    errors, as report and export give them, and exit code 2."""
+    (tmp_path / "empty").mkdir()
+    truth = tmp_path / "truth.csv"
+    truth.write_text("timestamp\n")
+    for folder, expect in ((tmp_path / "nowhere", "not found; give the --out folder"),
+                           (tmp_path / "empty", "has no poses.csv; run 'wristtrack track")):
+        assert main(["evaluate", str(folder), "--truth", str(truth)]) == 2
+        err = capsys.readouterr().err
+        assert expect in err and err.count("\n") == 1 and "Traceback" not in err

@@ -37,12 +37,13 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     from wristtrack.analysis.evaluate import evaluate, format_report
     from wristtrack.io.atomic import write_json_atomic
+    from wristtrack.io.run_folder import run_file
 
     run = Path(args.run_dir)
     truth = Path(args.truth) if args.truth else None
     if truth is None:
         raise WristtrackError("give the ground truth with --truth truth.csv")
-    result = evaluate(run / "poses.csv", truth)
+    result = evaluate(run_file(run, "poses.csv"), truth)
     write_json_atomic(run / "evaluation.json", result)
     print(format_report(result))
     print(f"saved {run / 'evaluation.json'}")

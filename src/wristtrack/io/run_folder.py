@@ -1,7 +1,7 @@
 """Reading a finished run folder of ``wristtrack track`` back: poses.csv and summary.json.
 
-Shared by everything that works on a run after the fact (report, exports), so a missing or
-damaged run folder gives the same one-line errors everywhere.
+Shared by everything that works on a run after the fact (report, exports, evaluate, compare),
+so a missing or damaged run folder gives the same one-line errors everywhere.
 """
 
 from __future__ import annotations
@@ -20,18 +20,23 @@ from wristtrack.io.poses import read_poses
 SURVEYED_HAND = "hand_surveyed.json"
 
 
-def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""
+def run_file(run_dir: str | Path, name: str) -> Path:
+    """The file ``name`` of a run folder; InputError with one line where the folder or the file
+    is missing."""
     run = Path(run_dir)
     if not run.is_dir():
         what = "is a file, not a folder" if run.exists() else "not found"
         raise InputError(f"run folder {run} {what}; give the --out folder of 'wristtrack track'")
-    poses, summary_path = run / "poses.csv", run / "summary.json"
-    for path in (poses, summary_path):
-        if not path.is_file():
-            raise InputError(
-                f"run folder {run} has no {path.name}; run 'wristtrack track ... --out {run}' first"
-            )
+    path = run / name
+    if not path.is_file():
+        raise InputError(
+            f"run folder {run} has no {name}; run 'wristtrack track ... --out {run}' first")
+    return path
+
+
+def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""
+    poses, summary_path = run_file(run_dir, "poses.csv"), run_file(run_dir, "summary.json")
     try:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as exc:
