@@ -31,3 +31,25 @@ def test_unknown_scenario_is_one_line_without_traceback(tmp_path):
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "nope" in lines[0]
+
+
+def test_argument_errors_are_one_line_naming_the_help(tmp_path, capsys):
+    """argparse's own errors (a required option missing, a value out of range, an unknown
+    command) come as one line, as the commands' own do, pointing at the command's --help
+    instead of printing the whole usage first."""
+    cases = ((["track", str(tmp_path)], "wristtrack track: error: the following arguments are "
+              "required: --out (options: wristtrack track --help)"),
+             (["track", str(tmp_path), "--out", str(tmp_path / "o"), "--coast-limit", "-3", "1"],
+              "argument --coast-limit: -3 is not a number >= 0"),
+             (["simulate", str(tmp_path / "x"), "--seed", "-1"],
+              "argument --seed: -1 is not a whole number >= 0"),
+             (["nosuch"], "wristtrack: error: argument command: invalid choice: 'nosuch'"))
+    for argv, expect in cases:
+        try:
+            main(argv)
+        except SystemExit as exc:
+            assert exc.code == 2
+        else:
+            raise AssertionError(f"{argv} was accepted")
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expect in err and "usage:" not in err, err

@@ -13,6 +13,15 @@ from wristtrack.cli import runs, simulate, track
 from wristtrack.errors import WristtrackError
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line, as the commands' own are: what is wrong and
+    where the options are listed, not the whole usage first (the commands share it through
+    add_subparsers, which makes its parsers of the parent's class)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (options: {self.prog} --help)\n")
+
+
 class _Version(argparse.Action):
     """``--version``: the version and which tracker step runs (compiled or the generic path);
     numba is loaded only when this is asked for."""
@@ -29,7 +38,7 @@ class _Version(argparse.Action):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="wristtrack",
         description="6-DoF wrist pose from one RGB-D camera and six blue markers on the hand.",
     )

@@ -5,7 +5,12 @@ from __future__ import annotations
 
 import argparse
 
-from wristtrack.cli.options import positive_int
+from wristtrack.cli.options import (
+    finite_non_negative,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 from wristtrack.errors import WristtrackError
 
 
@@ -16,12 +21,22 @@ def _simulate(args: argparse.Namespace) -> int:
     effects = set(PRESET_REAL if args.preset == "real" else ())
     effects |= {e for e in EFFECTS if getattr(args, e, False)}
     if args.motion or args.cluster:
+        if args.scenario is not None or args.n_frames is not None:
+            raise WristtrackError(
+                "--scenario and --n-frames are for the scripted scenarios; a recorded motion "
+                "(--motion) takes its segment from --motion-start and --motion-duration")
         return _simulate_recorded(args, sorted(effects))
+    given = [f"--{name.replace('_', '-')}" for name in RECORDED_DEFAULTS
+             if getattr(args, name) is not None]
+    if given:
+        raise WristtrackError(
+            f"{', '.join(given)}: only for a recorded motion (--motion FILE --cluster A,B,C); "
+            "a scripted scenario renders at 30 frames/s, its movement as scripted")
     options = {"effects": sorted(effects), "hand_side": args.hand_side}
     if args.n_frames is not None:
         options["n_frames"] = args.n_frames
-    out = render_recording(args.out, args.scenario, seed=args.seed, overwrite=args.overwrite,
-                           **options)
+    out = render_recording(args.out, args.scenario or DEFAULT_SCENARIO, seed=args.seed,
+                           overwrite=args.overwrite, **options)
     side = "" if args.hand_side == "right" else f", {args.hand_side} hand"
     print(f"wrote simulated recording {out} (ground truth in {out}/truth.csv; effects: "
           f"{', '.join(sorted(effects)) or 'none'}{side})")
@@ -33,6 +48,9 @@ def _simulate_recorded(args: argparse.Namespace, effects: list[str]) -> int:
 
     if not (args.motion and args.cluster):
         raise WristtrackError("--motion FILE and --cluster A,B,C go together")
+    for name, default in RECORDED_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
     reference = ReferenceSettings(
         rate_hz=args.reference_rate, offset_s=args.reference_offset,
         ratio=args.reference_clock_ratio, noise_mm=args.reference_noise,
@@ -48,6 +66,15 @@ def _simulate_recorded(args: argparse.Namespace, effects: list[str]) -> int:
           f"the motion-capture reference in {out}/reference.c3d, planted values in "
           f"{out}/reference.json)")
     return 0
+
+
+DEFAULT_SCENARIO = "deviation"
+# The recorded motion's settings (None on the command line: not given) and their defaults
+RECORDED_DEFAULTS = {
+    "motion_start": None, "motion_duration": None, "speed": 1.0, "position_scale": 1.0,
+    "rotation_scale": 1.0, "fps": 30.0, "reference_rate": 100.0, "reference_offset": 0.4173,
+    "reference_clock_ratio": 1.0002, "reference_noise": 0.05,
+}
 
 
 # One switch per simulator effect (wristtrack.sim.realism.EFFECTS; left_hand is --hand-side).
@@ -72,8 +99,8 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     """Register this module's commands on the top-level parser's subparsers."""
     simulate = sub.add_parser("simulate", help="write a synthetic RGB-D recording with truth")
     simulate.add_argument("out", help="folder to create")
-    simulate.add_argument("--scenario", default="deviation")
-    simulate.add_argument("--seed", type=int, default=0)
+    simulate.add_argument("--scenario", help=f"scripted scenario (default {DEFAULT_SCENARIO})")
+    simulate.add_argument("--seed", type=non_negative_int, default=0)
     simulate.add_argument("--overwrite", action="store_true")
     simulate.add_argument("--n-frames", type=positive_int, metavar="N",
                           help="render N frames (the scenario's movement squeezed into them)")
@@ -89,21 +116,29 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     rec.add_argument("--motion", metavar="FILE",
                      help="drive the hand with a recorded cluster's motion (.c3d, .trc, .tsv)")
     rec.add_argument("--cluster", metavar="A,B,C", help="the cluster's marker labels in FILE")
-    rec.add_argument("--motion-start", type=float, metavar="S",
+    d = RECORDED_DEFAULTS
+    rec.add_argument("--motion-start", type=finite_non_negative, metavar="S",
                      help="segment start in FILE (default: its longest stretch without gaps)")
-    rec.add_argument("--motion-duration", type=float, metavar="S", help="segment length")
-    rec.add_argument("--speed", type=float, default=1.0,
-                     help="play the motion this much faster (< 1: slower; stated in metadata)")
-    rec.add_argument("--position-scale", type=float, default=1.0,
-                     help="shrink the displacement (to stay in view)")
-    rec.add_argument("--rotation-scale", type=float, default=1.0,
-                     help="shrink the angular velocity")
-    rec.add_argument("--fps", type=float, default=30.0, help="camera frame rate")
-    rec.add_argument("--reference-rate", type=float, default=100.0, metavar="HZ",
-                     help="the motion-capture system's rate")
-    rec.add_argument("--reference-offset", type=float, default=0.4173, metavar="S",
-                     help="planted clock offset (reference time = offset + ratio x camera time)")
-    rec.add_argument("--reference-clock-ratio", type=float, default=1.0002, metavar="R")
-    rec.add_argument("--reference-noise", type=float, default=0.05, metavar="MM",
-                     help="marker noise of the reference, per coordinate")
+    rec.add_argument("--motion-duration", type=positive_float, metavar="S",
+                     help="segment length")
+    rec.add_argument("--speed", type=positive_float,
+                     help=f"play the motion this much faster (< 1: slower; stated in metadata; "
+                     f"default {d['speed']})")
+    rec.add_argument("--position-scale", type=positive_float,
+                     help=f"shrink the displacement (to stay in view; default "
+                     f"{d['position_scale']})")
+    rec.add_argument("--rotation-scale", type=positive_float,
+                     help=f"shrink the angular velocity (default {d['rotation_scale']})")
+    rec.add_argument("--fps", type=positive_float,
+                     help=f"camera frame rate (default {d['fps']})")
+    rec.add_argument("--reference-rate", type=positive_float, metavar="HZ",
+                     help=f"the motion-capture system's rate (default {d['reference_rate']})")
+    rec.add_argument("--reference-offset", type=float, metavar="S",
+                     help="planted clock offset (reference time = offset + ratio x camera time; "
+                     f"default {d['reference_offset']})")
+    rec.add_argument("--reference-clock-ratio", type=positive_float, metavar="R",
+                     help=f"default {d['reference_clock_ratio']}")
+    rec.add_argument("--reference-noise", type=finite_non_negative, metavar="MM",
+                     help="marker noise of the reference, per coordinate (default "
+                     f"{d['reference_noise']})")
     simulate.set_defaults(handler=_simulate)
