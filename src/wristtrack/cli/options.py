@@ -22,6 +22,13 @@ def _number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
 
 
+def finite_float(text: str) -> float:
+    value = _number(text)
+    if not abs(value) < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+    return value
+
+
 def positive_float(text: str) -> float:
     value = _number(text)
     if not 0 < value < float("inf"):

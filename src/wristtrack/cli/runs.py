@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from wristtrack.cli.options import finite_float, positive_float
 from wristtrack.errors import WristtrackError
 
 
@@ -94,12 +95,12 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                       help="labels of a rigid cluster of 3+ markers on the back of the hand")
     comp.add_argument("--no-clock-ratio", action="store_true",
                       help="fit the time offset only (assume both clocks run at the same rate)")
-    comp.add_argument("--max-lag", type=float, metavar="S",
+    comp.add_argument("--max-lag", type=positive_float, metavar="S",
                       help="search the time offset within +-S seconds only")
-    comp.add_argument("--time-offset", type=float, metavar="S",
+    comp.add_argument("--time-offset", type=finite_float, metavar="S",
                       help="the clocks' offset when known (synchronised systems; needed for a "
                       "static trial): reference time = our time + S, not fitted")
-    comp.add_argument("--lowpass", type=float, metavar="HZ",
+    comp.add_argument("--lowpass", type=positive_float, metavar="HZ",
                       help="low-pass the reference's marker trajectories at HZ first, as labs "
                       "filter motion-capture data (4th-order zero-lag Butterworth; e.g. 10); "
                       "default: as recorded")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from wristtrack.cli.options import (
+    finite_float,
     finite_non_negative,
     non_negative_int,
     positive_float,
@@ -133,7 +134,7 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                      help=f"camera frame rate (default {d['fps']})")
     rec.add_argument("--reference-rate", type=positive_float, metavar="HZ",
                      help=f"the motion-capture system's rate (default {d['reference_rate']})")
-    rec.add_argument("--reference-offset", type=float, metavar="S",
+    rec.add_argument("--reference-offset", type=finite_float, metavar="S",
                      help="planted clock offset (reference time = offset + ratio x camera time; "
                      f"default {d['reference_offset']})")
     rec.add_argument("--reference-clock-ratio", type=positive_float, metavar="R",
