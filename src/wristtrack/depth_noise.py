@@ -12,6 +12,9 @@ Nguyen et al.'s noise also grows where the surface is seen obliquely, beyond 60 
 normal (:func:`oblique_sigma`, :func:`lateral_sigma_nguyen`): a hand turned edge-on.
 At a depth edge (:func:`neighbour_jumps`) the matching window gives the nearer surface's depth
 to 1-2 px of the farther one: the simulator spreads it there, the skin patches stay clear of it.
+A structured-light camera finds each pixel's disparity by matching a window of the projected
+pattern around it, so neighbouring pixels share their noise (:func:`window_correlation`): the
+simulator draws it so, the skin patches' readings are weighed so.
 """
 
 from __future__ import annotations
@@ -19,6 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 KINECT_DEPTH_COEFF = 1.425e-3  # 1/m: sigma_z = coeff * z^2 (Khoshelham and Elberink 2012)
+# The Kinect v1 / Xtion's block-matching window (px): its depth noise is correlated over it
+# (../shared/realdata/README.md).
+MATCH_WINDOW_PX = 9
 
 
 def depth_sigma(
@@ -76,6 +82,15 @@ def lateral_sigma_nguyen(cos_incidence: float | np.ndarray) -> float | np.ndarra
     :func:`oblique_sigma`: 0.8 px facing the camera, 1.1 px at 80 deg."""
     theta = np.minimum(np.arccos(np.minimum(np.abs(cos_incidence), 1.0)), np.radians(80.0))
     return 0.8 + 0.035 * theta / (np.pi / 2 - theta)
+
+
+def window_correlation(du: np.ndarray, dv: np.ndarray,
+                       window: int = MATCH_WINDOW_PX) -> np.ndarray:
+    """Correlation of the depth noise of two pixels (du, dv) px apart (arrays of any one shape)
+    when the noise is white noise averaged over a ``window`` x ``window`` matching window: the
+    windows' overlap, (1 - |du| / w)(1 - |dv| / w), zero from w px apart on."""
+    w = float(window)
+    return (np.maximum(1.0 - np.abs(du) / w, 0.0) * np.maximum(1.0 - np.abs(dv) / w, 0.0))
 
 
 def neighbour_jumps(z: np.ndarray, threshold: float, jump_to_zero: bool) -> np.ndarray:

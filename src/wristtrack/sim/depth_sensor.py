@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from wristtrack.depth_noise import (
+    MATCH_WINDOW_PX,
     depth_sigma,
     depth_sigma_nguyen,
     lateral_sigma_nguyen,
@@ -140,7 +141,7 @@ class DepthSensor:
         r = self.fx_rng
         self.fatten_rng = np.random.default_rng(r.bit_generator.seed_seq.spawn(1)[0])
         pad = (H + NOISE_PAD, W + NOISE_PAD)
-        win = realism.MATCH_WINDOW_PX
+        win = MATCH_WINDOW_PX
         # Correlated over the matching window: white noise averaged over 9x9, unit variance.
         white = r.standard_normal((3, *pad), dtype=np.float32)
         self.sl_bank = np.stack([cv2.blur(b, (win, win)) for b in white])

@@ -95,7 +95,6 @@ HIGHLIGHT_PEAK = 230.0
 # structured light (Kinect v1 / Xtion)
 DISPARITY_STEP_PX = 1.0 / 8.0
 FOCAL_BASELINE = 1.0 / (8.0 * 2.85e-3)  # px m: 1/8 px disparity = 2.85e-3 z^2 m
-MATCH_WINDOW_PX = 9
 BORDER_TOP, BORDER_BOTTOM, BORDER_RIGHT, BORDER_LEFT_RAMP = 15, 5, 31, 15
 EDGE_JUMP_M = 0.012
 # Foreground fattening: the nearer surface's depth reaches 1-2 px past a depth edge (this many at

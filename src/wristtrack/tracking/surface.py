@@ -19,7 +19,14 @@ window, so that their noises are nearly independent) is a depth measurement of t
 - Used as a second unscented update after the markers' (:func:`surface_update`): the measured
   depth of each centre ray against where the ray meets the patch's plane at each sigma point
   (:func:`plane_depths`). Noise: the sensor's axial noise, the skin's own shape error and the
-  colour-depth misregistration, which the patches share as the markers do. The axial noise is
+  colour-depth misregistration, which the patches share as the markers do. The sensor's noise
+  is shared too, through its matching window (:func:`reading_correlation`): facing the camera
+  the patches' image discs lie ~10 px apart and share a tenth of it, but on a hand turned
+  edge-on their images crowd together (4 px apart at ~65 deg: three quarters shared, discs
+  overlapping), and taken as independent there, the readings of one stretch of skin counted
+  many times, and each frame's noise moved the pose by up to 1.2 deg (0.8 with the correlation;
+  every effect, right hand making the left hand's movement, seed 0: pronation at the extremes
+  of the movement, with exact pixels and marker depths too). The axial noise is
   taken as facing the camera, without the growth beyond 60 deg the markers' depth takes
   (depth_noise.oblique_sigma): with it, the extremes of a turned hand's movement leaned on the
   pixels and the worst range-of-motion error grew (every effect, right hands making the left
@@ -36,10 +43,11 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
+from scipy.signal import convolve2d
 from scipy.spatial import Delaunay
 
 from wristtrack.camera import Camera
-from wristtrack.depth_noise import neighbour_jumps
+from wristtrack.depth_noise import MATCH_WINDOW_PX, neighbour_jumps, window_correlation
 from wristtrack.filter import ukf
 from wristtrack.hand import HandLayout
 from wristtrack.tracking.observation import (
@@ -91,14 +99,17 @@ class DorsumSurface:
 @dataclass(frozen=True)
 class PatchReading:
     """One frame's readings: which patches (indices), their centre rays (K, 3) with z = 1, the
-    measured depth (m) along each, and the patches' centres and normals (K, 3) in the camera
-    frame at the pose they were read at."""
+    measured depth (m) along each, the patches' centres and normals (K, 3) in the camera
+    frame at the pose they were read at, and the image discs read: centre pixels (K, 2) (u, v)
+    and radii (K,) px."""
 
     patches: np.ndarray
     rays: np.ndarray
     depth: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    pixels: np.ndarray
+    radius_px: np.ndarray
 
 
 def plane_depths(points: np.ndarray, normals: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -255,7 +266,41 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     mean = (csum[rows, hi] - csum[rows, lo]) / (hi - lo)
     centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
     measured = plane_depths(P[read], N[read], centre) + mean
-    return PatchReading(index[read], centre, measured, P[read], N[read])
+    return PatchReading(index[read], centre, measured, P[read], N[read],
+                        np.rint(uv[read]).astype(int), r_px[read])
+
+
+def reading_correlation(reading: PatchReading, window: int = MATCH_WINDOW_PX) -> np.ndarray:
+    """(K, K) correlation of the sensor noise of a frame's patch readings: each is the mean of
+    an image disc of a depth noise correlated over the matching window
+    (depth_noise.window_correlation), so two discs fewer than a window plus a disc apart share
+    part of it (module doc), and discs that overlap share pixels too."""
+    r2 = round(4.0 * float(np.mean(reading.radius_px)) ** 2)
+    table = _disc_mean_correlation(r2, window)
+    c = table.shape[0] // 2
+    d = reading.pixels[:, None] - reading.pixels[None]  # (K, K, 2) offsets (du, dv)
+    far = (np.abs(d) > c).any(axis=2)
+    d = np.clip(d, -c, c)
+    out = table[d[..., 1] + c, d[..., 0] + c]
+    out[far] = 0.0
+    return out
+
+
+@lru_cache(maxsize=64)
+def _disc_mean_correlation(r2_quarters: int, window: int) -> np.ndarray:
+    """Correlation of the means of two discs of pixels (read_patches': radius^2 =
+    ``r2_quarters`` / 4 px^2) at every offset (dv, du) of their centres, a table centred on
+    offset 0: the pairs of pixels at each offset (the discs' cross-correlation) weighed by
+    window_correlation, over its value at offset 0."""
+    r2 = r2_quarters / 4.0
+    h = int(np.floor(np.sqrt(r2)))
+    off = np.arange(-h, h + 1)
+    du, dv = np.meshgrid(off, off)
+    disc = (du * du + dv * dv <= r2).astype(np.float64)
+    pairs = convolve2d(disc, disc[::-1, ::-1])
+    k = np.arange(1 - window, window)
+    g = convolve2d(pairs, window_correlation(k[None, :], k[:, None], window))
+    return g / g[g.shape[0] // 2, g.shape[1] // 2]
 
 
 def near_depth_edges(depth: np.ndarray, depth_scale: float, iv: np.ndarray, iu: np.ndarray,
@@ -329,7 +374,9 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
                                        camera.fy)
 
     pred = ukf.predict_measurement(model, x, P, h, params)
-    R = np.diag(noise.depth_sigma(reading.depth) ** 2 + settings.shape_sigma ** 2)
+    sd = noise.depth_sigma(reading.depth)
+    R = np.outer(sd, sd) * reading_correlation(reading) + np.diag(
+        np.full(len(sd), settings.shape_sigma**2))
     if offset_of is None:  # the misregistration as noise the patches share
         G = registration_depth_jacobian(reading.points, reading.normals, noise.registration_px,
                                         camera.fx, camera.fy)
