@@ -286,7 +286,7 @@ def reading_correlation(reading: PatchReading, window: int = MATCH_WINDOW_PX) ->
     return out
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=256)  # every radius a recording's depths give (0.5 ms each to build)
 def _disc_mean_correlation(r2_quarters: int, window: int) -> np.ndarray:
     """Correlation of the means of two discs of pixels (read_patches': radius^2 =
     ``r2_quarters`` / 4 px^2) at every offset (dv, du) of their centres, a table centred on
