@@ -149,6 +149,13 @@ def _trip_rows(trips: list[dict]) -> list[str]:
     return rows
 
 
+def _warning_rows(trips: list[dict], modes: tuple[str, ...]) -> list[str]:
+    """What ``compare`` warned of on each of these trips' comparisons (a failed alignment is
+    only as bad as it is silent)."""
+    return [f"- {t['name']}, {mode}: warnings: {'; '.join(t[mode].get('warnings') or ['none'])}"
+            for t in trips for mode in modes if t.get(mode) and "error" not in t[mode]]
+
+
 def _agreement_rows(trips: list[dict]) -> list[str]:
     rows = [
         "| motion | angle | bias (deg) | 95 % LoA (deg) | ICC(2,1) | RoM ours / ref. (deg) "
@@ -345,6 +352,8 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "",
         *(_trip_rows(stress) if any(t.get("markers") for t in stress) else []),
         "",
+        *_warning_rows(stress, ("markers", "lowpass", "cluster")),
+        "",
         "### A static pose (biobuddy, anatomical calibration trial)",
         "",
         "The hand held still (2 s of the real take: the optoelectronic noise and a little sway "
@@ -355,8 +364,7 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "",
         *_trip_rows(static),
         "",
-        *[f"- {t['name']}, {mode}: warnings: {'; '.join(t[mode].get('warnings') or ['none'])}"
-          for t in static for mode in ("markers",) if t.get(mode)],
+        *_warning_rows(static, ("markers",)),
         "",
         *_agreement_rows(static[1:]),
         "",
