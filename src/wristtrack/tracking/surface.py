@@ -238,8 +238,9 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     half = int(np.ceil(r_px.max()))
     off = np.arange(-half, half + 1)
     du, dv = np.meshgrid(off, off)
-    pu = np.rint(uv[:, 0])[:, None] + du.ravel()  # (K, w*w) pixel columns and rows
-    pv = np.rint(uv[:, 1])[:, None] + dv.ravel()
+    centre_px = np.rint(uv).astype(int)  # each disc's centre pixel (its correlation's too)
+    pu = centre_px[:, :1] + du.ravel()  # (K, w*w) pixel columns and rows
+    pv = centre_px[:, 1:] + dv.ravel()
     H, W = depth.shape
     inside = ((pu - uv[:, :1]) ** 2 + (pv - uv[:, 1:]) ** 2 <= r_px[:, None] ** 2) \
         & (pu >= 0) & (pu < W) & (pv >= 0) & (pv < H)
@@ -267,7 +268,7 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
     centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
     measured = plane_depths(P[read], N[read], centre) + mean
     return PatchReading(index[read], centre, measured, P[read], N[read],
-                        np.rint(uv[read]).astype(int), r_px[read])
+                        centre_px[read], r_px[read])
 
 
 def reading_correlation(reading: PatchReading, window: int = MATCH_WINDOW_PX) -> np.ndarray:
