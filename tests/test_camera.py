@@ -174,6 +174,18 @@ def test_json_round_trip(tmp_path, name):
     assert Camera.from_dict(cam.to_dict()) == cam
 
 
+def test_depth_delay_round_trips_and_is_left_out_when_zero(tmp_path):
+    """camera.json's optional depth_delay_s: the depth frames' capture after the colour's."""
+    cam = dataclasses.replace(Camera.default(), depth_delay=-0.0125)
+    path = tmp_path / "camera.json"
+    cam.save(path)
+    assert json.loads(path.read_text())["depth_delay_s"] == -0.0125
+    assert Camera.load(path) == cam and Camera.load(path).depth_delay == -0.0125
+    Camera.default().save(path)
+    assert "depth_delay_s" not in json.loads(path.read_text())
+    assert Camera.load(path).depth_delay == 0.0
+
+
 def test_load_accepts_integral_floats_and_extra_fields(tmp_path):
     path = write_json(tmp_path, {**GOOD, "width": 640.0, "model": "xtion", "dist": None})
     cam = Camera.load(path)
@@ -207,6 +219,9 @@ def test_missing_field(tmp_path, field):
         ("dist", [0.1, "a", 0.0, 0.0]),
         ("dist", "0.1 0.2 0 0"),
         ("dist", 0.1),
+        ("depth_delay_s", 8),  # milliseconds given for seconds
+        ("depth_delay_s", "0.008"),
+        ("depth_delay_s", float("inf")),
     ],
 )
 def test_bad_field_value(tmp_path, field, value):

@@ -19,6 +19,9 @@ from wristtrack.jsonfile import read_config, write_config
 
 REQUIRED_FIELDS = ("fx", "fy", "cx", "cy", "width", "height", "depth_scale")
 DIST_LENGTHS = (4, 5, 8)
+# A depth frame paired with a colour frame by time stamp is at most half a frame interval away
+# from it (10 fps is the slowest rate a depth camera streams at): longer is a unit mistake.
+MAX_DEPTH_DELAY_S = 0.05
 # Coarsest plausible depth unit (1 cm): 16-bit depth then reaches 655 m. Larger values are
 # inverted units (1000 for millimetres) and would make every depth reading absurd.
 MAX_DEPTH_SCALE = 0.01
@@ -70,6 +73,11 @@ class Camera:
     """Intrinsics of the (registered) colour camera, plus the depth unit.
 
     ``depth_scale`` is metres per raw depth unit (0.001 for millimetre depth images).
+    ``depth_delay`` (s, camera.json ``depth_delay_s``, optional) is how long after the colour
+    frame its depth frame was captured (negative: before). The depth and colour streams of a
+    consumer RGB-D camera run on their own clocks, and each colour frame is paired with the
+    depth frame nearest in time, up to half a frame interval away (io/rosbag.py); over a
+    recording the pair keeps its phase. 0 for depth captured with the colour.
     """
 
     fx: float
@@ -80,6 +88,7 @@ class Camera:
     height: int
     depth_scale: float = 0.001
     dist: tuple[float, ...] | None = None
+    depth_delay: float = 0.0
 
     def __post_init__(self) -> None:
         # Validate code-built cameras too, so a bad camera fails here and not deep in a filter.
@@ -94,6 +103,13 @@ class Camera:
             value = _check_number(d[field], field, where, positive=True, integer=True)
             object.__setattr__(self, field, value)
         object.__setattr__(self, "dist", _check_dist(d.get("dist"), where))
+        delay = _check_number(d.get("depth_delay", 0.0), "depth_delay_s", where, positive=False)
+        if abs(delay) > MAX_DEPTH_DELAY_S:
+            raise ConfigError(
+                f"{where}: field 'depth_delay_s' is {delay:g} s (at most {MAX_DEPTH_DELAY_S:g} "
+                "either way); it is seconds from the colour frame to its depth frame, e.g. 0.008"
+            )
+        object.__setattr__(self, "depth_delay", delay)
         if not (0.0 <= self.cx <= self.width and 0.0 <= self.cy <= self.height):
             raise ConfigError(
                 f"{where}: principal point ('cx', 'cy') = ({self.cx:g}, {self.cy:g}) lies outside "
@@ -248,6 +264,8 @@ class Camera:
         }
         if self.dist is not None:
             d["dist"] = list(self.dist)
+        if self.depth_delay != 0.0:
+            d["depth_delay_s"] = self.depth_delay
         return d
 
     @classmethod
@@ -263,12 +281,12 @@ class Camera:
         if missing:
             raise ConfigError(
                 f"{where}: missing field {', '.join(repr(f) for f in missing)}; camera.json needs "
-                f"{', '.join(REQUIRED_FIELDS)} (and optionally dist)"
+                f"{', '.join(REQUIRED_FIELDS)} (and optionally dist, depth_delay_s)"
             )
         # Validate with the file name in the message, then build (which re-checks cheaply).
         cam = object.__new__(cls)
-        cam._set_validated(d, where)
-        return cls(**{f: getattr(cam, f) for f in (*REQUIRED_FIELDS, "dist")})
+        cam._set_validated({**d, "depth_delay": d.get("depth_delay_s", 0.0)}, where)
+        return cls(**{f: getattr(cam, f) for f in (*REQUIRED_FIELDS, "dist", "depth_delay")})
 
     @classmethod
     def load(cls, path: str | Path) -> Camera:
