@@ -52,12 +52,13 @@ STATES = {"rigid": TrackerConfig(follow_slide=False), "slide": TrackerConfig(),
           "offset": TrackerConfig(follow_offset=True)}
 
 
-def _initialised_tracker(seed: int, states: str = "rigid", lens=None) -> Tracker:
+def _initialised_tracker(seed: int, states: str = "rigid", lens=None, delay=0.0) -> Tracker:
     """A tracker initialised on a simulated recording (W0 and the layout fixed); with the
-    ``states`` (STATES) in its state, a camera with distortion ``lens``."""
+    ``states`` (STATES) in its state, a camera with distortion ``lens`` whose depth frames are
+    captured ``delay`` s after the colour."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario("deviation", rng=rng)
-    camera = replace(camera, dist=lens)
+    camera = replace(camera, dist=lens, depth_delay=delay)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
     tracker = Tracker(camera, layout, STATES[states])
     assert tracker.step(frames[0].detections).has_estimate
@@ -104,15 +105,16 @@ def _blob_var(obs, det: Detections) -> np.ndarray:
     return obs.blob_variance(det.suspect, det.count)
 
 
-@pytest.mark.parametrize(("states", "lens"), [
-    ("rigid", None), ("slide", None), ("offset", None), ("rigid", XTION_LENS),
-    ("offset", RATIONAL_LENS),
+@pytest.mark.parametrize(("states", "lens", "delay"), [
+    ("rigid", None, 0.0), ("slide", None, 0.0), ("offset", None, 0.0),
+    ("rigid", XTION_LENS, 0.0), ("offset", RATIONAL_LENS, 0.0), ("slide", None, 0.012),
+    ("offset", XTION_LENS, -0.016),
 ])  # fmt: skip
-def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, states, lens):
+def test_compiled_step_equals_the_generic_step_on_400_random_frames(step, states, lens, delay):
     """Suspect blobs among them, taken at the model's pixel sigma above a learned one; with
     and without the skin slide (its spread learned to half the model's) and the depth offset
-    in the state, and lens distortion."""
-    tracker = _initialised_tracker(seed=7, states=states, lens=lens)
+    in the state, lens distortion, and depth captured after or before the colour."""
+    tracker = _initialised_tracker(seed=7, states=states, lens=lens, delay=delay)
     if states != "rigid":
         tracker.model.slide_scale = 0.5
     obs = tracker._observation(True)
@@ -216,22 +218,24 @@ def _assert_same_results(first, second) -> None:
             assert a.nis == pytest.approx(b.nis, rel=REL, nan_ok=True)
 
 
-def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2) -> list:
+def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0.0) -> list:
     """Track scenario ``name`` (acceptance noise) as seen through a lens with distortion
-    ``lens`` (None: a pinhole)."""
+    ``lens`` (None: a pinhole), depth captured ``delay`` s after the colour."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario(name, rng=rng)
-    camera = replace(camera, dist=lens)
+    camera = replace(camera, dist=lens, depth_delay=delay)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
     tracker = Tracker(camera, layout, config)
     return [tracker.step(f.detections) for f in frames]
 
 
-@pytest.mark.parametrize(("name", "states", "lens"), [
-    ("pronation", "rigid", None), ("mix", "rigid", None), ("mix", "slide", None),
-    ("mix", "offset", None), ("mix", "rigid", XTION_LENS), ("pronation", "offset", XTION_LENS),
+@pytest.mark.parametrize(("name", "states", "lens", "delay"), [
+    ("pronation", "rigid", None, 0.0), ("mix", "rigid", None, 0.0), ("mix", "slide", None, 0.0),
+    ("mix", "offset", None, 0.0), ("mix", "rigid", XTION_LENS, 0.0),
+    ("pronation", "offset", XTION_LENS, 0.0), ("mix", "slide", None, 0.014),
 ])  # fmt: skip
-def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, states, lens):
+def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, states, lens,
+                                                        delay):
     """Acceptance noise: clutter, misses, an occlusion, irregular frame intervals; with the
     skin slide in the state, its spread learned as the track goes; through a real lens."""
     taken = []
@@ -244,10 +248,10 @@ def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name,
 
     monkeypatch.setattr(Tracker, "_compiled_frame", counted)
     config = STATES[states]
-    fast = _tracked(name, config, lens)
+    fast = _tracked(name, config, lens, delay=delay)
     assert sum(taken) > 0.9 * len(taken)  # the compiled step took nearly every frame
     monkeypatch.setattr(Tracker, "_compiled_frame", lambda self, det, track, dt: None)
-    generic = _tracked(name, config, lens)
+    generic = _tracked(name, config, lens, delay=delay)
     _assert_same_results(fast, generic)
 
 

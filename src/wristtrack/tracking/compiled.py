@@ -31,6 +31,7 @@ from wristtrack.tracking.kernel import (
     _CX,
     _CY,
     _DEPTH_COEFF,
+    _DEPTH_DELAY,
     _DEPTH_FLOOR,
     _DEPTH_OBLIQUE,
     _DEPTH_OFFSET,
@@ -105,6 +106,7 @@ def frame_constants(
     par[_GATE_CONSTANT], par[_HALF_GATE] = gate_constant, half_gate
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     par[_OFFSET_GRAZING_COS] = OFFSET_GRAZING_COS
+    par[_DEPTH_DELAY] = obs.depth_delay
     par[_MERGE_REACH] = merged.merge_reach(camera.fx) if merged_blobs else 0.0
     sliding = np.zeros(obs.n_markers)
     par[_DISTORTED] = float(camera.has_distortion)

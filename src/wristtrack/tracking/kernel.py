@@ -46,8 +46,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
     _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _SLIDE_TAU, _DISTORTED,
-    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _N_SCALARS,
-) = range(27)  # fmt: skip
+    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _DEPTH_DELAY, _N_SCALARS,
+) = range(28)  # fmt: skip
 _SLIDE_VAR = _N_SCALARS  # the slide's stationary variances (3)
 _DIST = _SLIDE_VAR + 3  # the lens distortion, Camera's (k1, k2, p1, p2, k3, k4, k5, k6)
 _N_PAR = _DIST + 8
@@ -148,6 +148,8 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     for i in range(3):
         sq_s[i] = math.sqrt(par[_SLIDE_VAR + i] * (1.0 - keep * keep))
     sp = np.zeros(3)  # a point's slide, propagated, along the hand's axes
+    delay = par[_DEPTH_DELAY]  # the depth frame's capture after the colour's (s), and a
+    vs, ws = np.empty(3), np.empty(3)  # point's velocity and angular velocity (W0)
     scale = par[_SCALE]
     sqdt = math.sqrt(dt)
     sa_v = par[_SQRT_QA] * sqdt  # velocity change per unit noise offset: sqrt(q_a / dt) dt
@@ -212,8 +214,12 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
         px = x[9] + dt * x[12] + W[s, m + 3]
         py = x[10] + dt * x[13] + W[s, m + 4]
         pz = x[11] + dt * x[14] + W[s, m + 5]
-        for i in range(3 if n_off else 0):
+        for i in range(3 if n_off or delay else 0):
             nc[i] = R_c0[i, 0] * R[0, 2] + R_c0[i, 1] * R[1, 2] + R_c0[i, 2] * R[2, 2]
+        if delay:  # the sigma point's rates, W0
+            for i in range(3):
+                vs[i] = x[12 + i] + W[s, m + 6 + i]
+                ws[i] = x[15 + i] + W[s, m + 9 + i]
         for j in range(J):
             a = layout[j, 0] + sliding[j] * sp[0]
             b = layout[j, 1] + sliding[j] * sp[1]
@@ -226,9 +232,16 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             Z = R_c0[2, 0] * hx + R_c0[2, 1] * hy + R_c0[2, 2] * hz + t_c0[2]
             W[s, j], W[s, J + j] = _pixel(X, Y, Z, par)
             W[s, 2 * J + j] = Z
-            if n_off:  # its depth read off the blob, on the skin's slope
+            if n_off or delay:
                 slope = _slope(X, Y, Z, nc[0], nc[1], nc[2], par[_OFFSET_GRAZING_COS])
+            if n_off:  # its depth read off the blob, on the skin's slope
                 W[s, 2 * J + j] += slope * (nc[0] * ro[0] / par[_FX] + nc[1] * ro[1] / par[_FY])
+            if delay:  # in a depth frame captured delay after the colour: the skin moved
+                ra, rb, rc = hx - px, hy - py, hz - pz  # delay n.(v + w x R a) along n
+                towards = (R[0, 2] * (vs[0] + ws[1] * rc - ws[2] * rb)
+                           + R[1, 2] * (vs[1] + ws[2] * ra - ws[0] * rc)
+                           + R[2, 2] * (vs[2] + ws[0] * rb - ws[1] * ra))
+                W[s, 2 * J + j] -= delay * towards * slope / Z
     qc[1:] = -qc[1:]
 
 

@@ -113,6 +113,11 @@ class ConstantRateModel:
     def velocities(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return x[12:15], x[15:18]
 
+    @staticmethod
+    def rates(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The linear and angular velocities (S, 3) each, in W0, of states X (S, D)."""
+        return X[:, 12:15], X[:, 15:18]
+
     def initial_covariance(
         self, pose_cov: np.ndarray, v_sigma: float = 0.05, w_sigma: float = 0.3
     ) -> np.ndarray:

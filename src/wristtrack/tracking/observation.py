@@ -128,6 +128,7 @@ class MarkerObservation:
         noise: MeasurementNoise = MeasurementNoise(),
         slide_of: Callable[[np.ndarray], np.ndarray] | None = None,
         offset_of: Callable[[np.ndarray], np.ndarray] | None = None,
+        rates_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
     ):
         self.camera = camera
         self.layout_T = np.asarray(layout_points, dtype=float).T.copy()  # (3, 6)
@@ -146,6 +147,11 @@ class MarkerObservation:
         # states (S, D) -> (S, 2) the depth map's offset from the colour image (px), where the
         # state carries it (tracking/offset_model.py): the misregistration is then no noise
         self.offset_of = offset_of
+        # states (S, D) -> their linear and angular velocities (S, 3) each, in W0: a depth frame
+        # captured camera.depth_delay after the colour reads the hand where they have moved it
+        # (:func:`lag_depth_change`); a model without rates (the paper's) reads it as still
+        self.rates_of = rates_of
+        self.depth_delay = camera.depth_delay if use_depth and rates_of is not None else 0.0
         if offset_of is not None:
             noise = replace(noise, registration_px=0.0)
         self.noise = noise
@@ -210,6 +216,11 @@ class MarkerObservation:
             if self.offset_of is not None:  # each depth read off its blob, on the skin's slope
                 out[..., 2] += depth_offset_change(pts, R_ch[:, None, :, 2], self.offset_of(X),
                                                    self.camera.fx, self.camera.fy)
+            if self.depth_delay:  # read in a depth frame captured before or after the colour
+                v, w = self.rates_of(X)
+                v_c, w_c = v @ self.R_c0.T, w @ self.R_c0.T
+                rates = v_c[:, None] + np.cross(w_c[:, None], pts - t_ch[:, None])
+                out[..., 2] += lag_depth_change(pts, R_ch[:, None, :, 2], rates, self.depth_delay)
         return out.reshape(X.shape[0], -1)
 
     def noise_variance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
@@ -298,11 +309,30 @@ def registration_depth_jacobian(points: np.ndarray, normals: np.ndarray, registr
     dz/du = -n_x z^2 / (fx n.p) (likewise in v), the slope taken no steeper than at
     ``grazing_cos``."""
     normals = np.broadcast_to(normals, points.shape)
-    d = np.einsum("kj,kj->k", points, normals)
-    steepest = grazing_cos * np.linalg.norm(points, axis=1)
-    d = np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
-    slope = registration_px * points[:, 2] ** 2 / d
+    slope = registration_px * points[:, 2] ** 2 / _along_normal(points, normals, grazing_cos)
     return np.column_stack((-normals[:, 0] * slope / fx, -normals[:, 1] * slope / fy))
+
+
+def _along_normal(points: np.ndarray, normals: np.ndarray, grazing_cos: float) -> np.ndarray:
+    """n . p of camera-frame ``points`` (..., 3) on surfaces with ``normals`` (..., 3), no
+    smaller in size than at ``grazing_cos``: the denominator of a depth read off a point along
+    its surface, which grows without bound towards a grazing view."""
+    d = np.einsum("...j,...j->...", points, normals)
+    steepest = grazing_cos * np.linalg.norm(points, axis=-1)
+    return np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
+
+
+def lag_depth_change(points: np.ndarray, normals: np.ndarray, rates: np.ndarray,
+                     delay: float) -> np.ndarray:
+    """(S, K) the change of the depth read at camera-frame ``points`` (S, K, 3), moving at
+    ``rates`` (S, K, 3) m/s on surfaces with ``normals`` ((S, K, 3) or (S, 1, 3)), in a depth
+    frame captured ``delay`` s after the colour frame (Camera.depth_delay): the surface moved by
+    delay (n . rate) along its normal, read along the point's ray, z delay (n . rate) / (n . p),
+    to first order in the delay (under 17 ms), no steeper than at OFFSET_GRAZING_COS, as the
+    depth map's offset (:func:`depth_offset_change`)."""
+    normals = np.broadcast_to(normals, points.shape)
+    towards = np.einsum("...j,...j->...", normals, rates)
+    return delay * points[..., 2] * towards / _along_normal(points, normals, OFFSET_GRAZING_COS)
 
 
 def depth_offset_change(points: np.ndarray, normals: np.ndarray, offset: np.ndarray, fx: float,

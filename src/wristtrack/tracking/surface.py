@@ -359,18 +359,24 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
     offset_of = getattr(model, "depth_offset", None)  # the misregistration in the state
     shift = None if surface.offset_shift is None else surface.offset_shift[reading.patches]
 
+    rates_of = getattr(model, "rates", None) if camera.depth_delay else None
+
     def h(X: np.ndarray) -> np.ndarray:
         R_ch, t_ch = hand_in_camera(*model.pose(X), R_c0, t_c0)
         Nw = np.einsum("sij,kj->ski", R_ch, nrm)
-        if offset_of is None:
-            Pw = np.einsum("sij,kj->ski", R_ch, pts) + t_ch[:, None]
-            return plane_depths(Pw, Nw, reading.rays[None])
-        o = offset_of(X)
-        # the planes moved back onto the skin (learned off it by the offset), then each centre
-        # ray's depth read off it by the offset: the plane's depth moved along its slope
-        skin = pts[None] - nrm[None] * (o @ shift.T)[..., None] if shift is not None else pts
+        o = None if offset_of is None else offset_of(X)
+        # with the offset, the planes moved back onto the skin (learned off it by the offset)
+        skin = pts if o is None or shift is None else (
+            pts[None] - nrm[None] * (o @ shift.T)[..., None])
         Pw = np.einsum("sij,s...j->s...i", R_ch, np.broadcast_to(skin, (len(X), *pts.shape)))
+        if rates_of is not None:  # read where the hand's rates move it over the depth's delay
+            v, w = rates_of(X)
+            Pw = Pw + camera.depth_delay * (
+                (v @ R_c0.T)[:, None] + np.cross((w @ R_c0.T)[:, None], Pw))
         z = plane_depths(Pw + t_ch[:, None], Nw, reading.rays[None])
+        if o is None:
+            return z
+        # each centre ray's depth read off it by the offset: the plane's depth along its slope
         return z + depth_offset_change(z[..., None] * reading.rays[None], Nw, o, camera.fx,
                                        camera.fy)
 

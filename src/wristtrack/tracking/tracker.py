@@ -289,7 +289,7 @@ class Tracker:
             self._obs[use_depth] = MarkerObservation(
                 self.camera, self.layout.points, self.R_c0, self.t_c0, self.model.pose,
                 use_depth, self.config.measurement, getattr(self.model, "skin_slide", None),
-                getattr(self.model, "depth_offset", None))
+                getattr(self.model, "depth_offset", None), getattr(self.model, "rates", None))
             self.learned_noise.apply(self._obs[use_depth])
         return self._obs[use_depth]
 
