@@ -559,3 +559,24 @@ def test_a_marker_slid_onto_the_finger_base_shows_whole():
     det = MarkerDetector(sc.camera).detect(frame.bgr, frame.depth, t)
     for j in range(2, 6):
         assert np.linalg.norm(det.uv - frame.uv[j], axis=1).min() < 0.15, MARKER_NAMES[j]
+
+
+def test_depth_lag_captures_the_depth_a_fixed_delay_after_the_colour():
+    """The depth frame paired with a colour frame is the one a camera without the lag captures
+    ``depth_delay`` later, to the pixel; the colour frame is unchanged (to a grey level: the box
+    redrawn around the moving hand is a little larger). The delay is drawn per
+    recording within half a frame interval and written into camera.json."""
+    lagged, plain = make_scene("reach", 8, effects=["depth_lag"]), make_scene("reach", 8)
+    delay = lagged.camera.depth_delay
+    assert delay == realism.depth_delay(8, plain.fps) and 0.01 < abs(delay) <= 0.5 / plain.fps
+    t = 2.1  # the reach's peak speed: the hand moves ~8 mm over the delay
+    ours = Renderer(lagged, 8).frame(t)
+    later, now = Renderer(plain, 8).frame(t + delay), Renderer(plain, 8).frame(t)
+    moved = (ours.depth > 0) & (now.depth > 0) & (np.abs(now.depth.astype(int) - later.depth) > 3)
+    assert moved.sum() > 1000
+    np.testing.assert_array_equal(ours.depth, later.depth)
+    assert np.median(np.abs(ours.depth[moved].astype(int) - now.depth[moved])) > 3  # mm
+    assert np.abs(ours.bgr.astype(int) - now.bgr).max() <= 1
+    delays = [realism.depth_delay(seed, 30.0) for seed in range(200)]
+    assert max(np.abs(delays)) <= 1 / 60 and np.std(delays) == pytest.approx(1 / 60 / 3**0.5,
+                                                                              rel=0.15)

@@ -93,6 +93,8 @@ _SIM_EFFECT_HELP = {
     "specular": "glossy domed markers with the lamp's highlight",
     "structured_light": "Kinect v1/Xtion depth: Nguyen noise, 1/8 px disparity steps, edge "
     "holes, invalid border, 1-2 px colour-depth misregistration",
+    "depth_lag": "depth captured up to half a frame before or after the colour (streams on "
+    "their own clocks), the delay in camera.json",
 }
 
 

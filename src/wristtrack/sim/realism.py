@@ -37,6 +37,13 @@ devices and the literature (``../shared/realdata/README.md``), not tuned to the 
   shadow, the registered depth map's invalid border as measured on real
   OpenNI frames (top 15, bottom 5, right 31 rows/columns, a ragged left band ~15 px), and
   colour-depth misregistration of 1-2 px.
+- ``depth_lag``: the depth and colour streams run on their own clocks (the D435's colour sensor
+  sits on a separate module; Kinect v1 / Xtion pair them in software), and each colour frame is
+  paired with the depth frame nearest in time: up to half a frame interval apart, as OpenNI's
+  frame sync, ROS's approximate-time pairing and our bag reader (io/rosbag.py) allow. Streams
+  at one nominal rate keep their phase over a recording, so the depth is captured a fixed
+  delay from the colour, drawn per recording uniformly within half a frame interval, and
+  written into camera.json (``depth_delay_s``) as the two streams' time stamps tell it.
 
 Without any effect the plain scenarios render exactly as before (Kinect depth noise
 1.425e-3 z^2, flat layout, no distortion), so older figures stay comparable.
@@ -65,6 +72,7 @@ EFFECTS = (
     "shutter",
     "specular",
     "structured_light",
+    "depth_lag",
 )
 # A real camera and hand at once. One compression (JPEG, as ROS records colour); the side of
 # the hand is chosen separately.
@@ -103,6 +111,13 @@ EDGE_JUMP_M = 0.012
 # surface apart (their mean is the fattening; a misregistration moves both alike): 1.9, 1.5 and
 # 1.0 px (tests/sim/test_realism.py).
 FATTEN_PX = 2
+
+
+def depth_delay(seed: int, fps: float) -> float:
+    """The depth frames' delay after the colour frames (s) of the ``depth_lag`` effect: uniform
+    within half a frame interval, drawn from the recording's seed."""
+    half = 0.5 / fps
+    return float(np.random.default_rng([seed, 6]).uniform(-half, half))
 
 
 def check_effects(effects: object) -> frozenset[str]:

@@ -296,7 +296,7 @@ def render_recorded(
 
     rec = load_recorded_motion(motion_file, cluster, start_s, duration_s, speed,
                                position_scale, rotation_scale)
-    scene = with_effects(recorded_scene(rec, fps), effects, hand_side)
+    scene = with_effects(recorded_scene(rec, fps), effects, hand_side, seed=seed)
     out = render_recording(out, scene, seed=seed, overwrite=overwrite)
     write_reference(out, scene, rec, scene.layout.points, reference or ReferenceSettings())
     return Path(out)

@@ -275,7 +275,10 @@ class Renderer:
         scene, cam, bg = self.scene, self.cam, self.bg
         times = self._subframe_times(t)
         moments = [self.moment(s) for s in times]
-        region = x0, y0, x1, y1 = self.region([mo.layer for mo in moments])
+        # the depth frame paired with this colour frame, captured cam.depth_delay after it
+        lagged = self.moment(t + cam.depth_delay) if scene.depth and cam.depth_delay else None
+        extra = [] if lagged is None else [lagged.layer]
+        region = x0, y0, x1, y1 = self.region([mo.layer for mo in moments] + extra)
         acc = np.zeros((y1 - y0, x1 - x0, 3), np.float32)
         mid = len(times) // 2
         z_mid, light = None, None
@@ -305,6 +308,10 @@ class Renderer:
         iy1 = (y1 - y0) - (m if y1 < cam.height else 0)
         img[y0 + iy0:y0 + iy1, x0 + ix0:x0 + ix1] = blurred[iy0:iy1, ix0:ix1]
         bgr = self.colour.capture(img, t, region)
+        if lagged is not None:
+            z_mid = bg.z[y0:y1, x0:x1].copy()
+            self.caster.draw(region, lagged.layer, bg.colour[y0:y1, x0:x1].copy(), z_mid,
+                             bg.ids[y0:y1, x0:x1].copy())
         depth = self.depth.capture(z_mid, region) if scene.depth else None
         return RenderedFrame(float(t), bgr, depth, cents, vis)
 

@@ -234,15 +234,15 @@ def make_scene(name: str, seed: int = 0, **options: Any) -> Scene:
         changes["layout"] = layout if isinstance(layout, HandLayout) else HandLayout.load(layout)
     scene = replace(scene, **changes)
     return with_effects(scene, options.get("effects", ()), options.get("hand_side", "right"),
-                        keep_exposure="exposure" in options)
+                        keep_exposure="exposure" in options, seed=seed)
 
 
 def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
-                 keep_exposure: bool = False) -> Scene:
+                 keep_exposure: bool = False, seed: int = 0) -> Scene:
     """``scene`` with realism ``effects`` switched on: those that change the hand or the camera
     (left hand, arched layout, lens distortion, long shutter) are applied to them here, the
     others when rendering. ``keep_exposure``: an exposure chosen explicitly wins over the
-    ``shutter`` effect's."""
+    ``shutter`` effect's. ``seed`` draws the depth stream's delay (``depth_lag``)."""
     names = set(realism.check_effects(effects))
     if hand_side not in ("right", "left"):
         raise ConfigError(f"hand side must be 'right' or 'left', got {hand_side!r}")
@@ -259,6 +259,8 @@ def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
         layout = realism.arched(layout)
     if "distortion" in names:
         camera = realism.distorted(camera)
+    if "depth_lag" in names and scene.depth:
+        camera = replace(camera, depth_delay=realism.depth_delay(seed, scene.fps))
     if "shutter" in names and not keep_exposure:
         exposure = realism.LONG_SHUTTER_S
     return replace(scene, layout=layout, camera=camera, exposure=exposure,
