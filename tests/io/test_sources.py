@@ -11,6 +11,7 @@ import shutil
 import sys
 import tracemalloc
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -26,6 +27,7 @@ from wristtrack.io.folder import RecordingWriter
 from wristtrack.io.live import opencv as live_module
 from wristtrack.io.open import open_recording
 from wristtrack.io.ros_messages import IMAGE, RosMessage, decode_colour, decode_depth
+from wristtrack.io.rosbag import paired_delay
 
 try:  # the test extra installs rosbags; without it only the ROS bag tests are skipped
     from rosbags.rosbag1 import Writer as Writer1
@@ -506,8 +508,9 @@ def test_bag_auto_detects_topics_and_camera(tmp_path, ros):
     assert rec.info_topic == "/camera/color/camera_info"
     assert len(rec) == N_BAG and rec.has_depth
     assert rec.time_origin == pytest.approx(T0_NS / 1e9, abs=1e-6)
+    # the depth stamped 2 ms after its colour frame (write_rgbd_bag): captured that much later
     expected = Camera(fx=80.0, fy=81.0, cx=31.7, cy=23.2, width=W, height=H, depth_scale=0.001,
-                      dist=D)
+                      dist=D, depth_delay=0.002)
     assert rec.camera == expected
     with rec:
         check_rgbd_frames(list(rec))
@@ -582,8 +585,20 @@ def test_bag_missing_topics_list_what_is_there(tmp_path):
         open_recording(path)
     one_line(err, "noinfo.bag", "CameraInfo", "/camera/color/image_raw", "--camera")
     rec = open_recording(path, camera=CAMERA)  # a camera file replaces camera_info
-    assert rec.camera == CAMERA and rec.info_topic is None
+    assert rec.camera == replace(CAMERA, depth_delay=0.002) and rec.info_topic is None
     check_rgbd_frames(list(rec))
+    stated = replace(CAMERA, depth_delay=-0.004)  # a delay the camera file states wins
+    assert open_recording(path, camera=stated).camera == stated
+
+
+def test_the_paired_frames_tell_the_depths_delay():
+    """The median offset of each colour stamp's nearest depth stamp within the tolerance: a
+    depth stream 12 ms behind at one rate, one depth frame dropped, one colour frame alone."""
+    colour = [k * 33_000_000 for k in range(8)]
+    depth = [c + 12_000_000 for c in colour if c != 99_000_000]
+    assert paired_delay(colour, depth, 16_500_000) == pytest.approx(0.012)
+    assert paired_delay(colour, depth, 10_000_000) is None  # nothing within 10 ms
+    assert paired_delay(colour, [], 16_500_000) is None
 
 
 @needs_rosbags
