@@ -174,16 +174,18 @@ def test_json_round_trip(tmp_path, name):
     assert Camera.from_dict(cam.to_dict()) == cam
 
 
-def test_depth_delay_round_trips_and_is_left_out_when_zero(tmp_path):
-    """camera.json's optional depth_delay_s: the depth frames' capture after the colour's."""
-    cam = dataclasses.replace(Camera.default(), depth_delay=-0.0125)
+@pytest.mark.parametrize("delay", [-0.0125, 0.0])
+def test_depth_delay_round_trips_and_unknown_is_left_out(tmp_path, delay):
+    """camera.json's optional depth_delay_s: the depth frames' capture after the colour's; 0 is
+    a stated delay (synchronised sensors), absent an unknown one."""
+    cam = dataclasses.replace(Camera.default(), depth_delay=delay)
     path = tmp_path / "camera.json"
     cam.save(path)
-    assert json.loads(path.read_text())["depth_delay_s"] == -0.0125
-    assert Camera.load(path) == cam and Camera.load(path).depth_delay == -0.0125
+    assert json.loads(path.read_text())["depth_delay_s"] == delay
+    assert Camera.load(path) == cam and Camera.load(path).depth_delay == delay
     Camera.default().save(path)
     assert "depth_delay_s" not in json.loads(path.read_text())
-    assert Camera.load(path).depth_delay == 0.0
+    assert Camera.load(path).depth_delay is None
 
 
 def test_load_accepts_integral_floats_and_extra_fields(tmp_path):

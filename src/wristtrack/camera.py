@@ -77,7 +77,8 @@ class Camera:
     frame its depth frame was captured (negative: before). The depth and colour streams of a
     consumer RGB-D camera run on their own clocks, and each colour frame is paired with the
     depth frame nearest in time, up to half a frame interval away (io/rosbag.py); over a
-    recording the pair keeps its phase. 0 for depth captured with the colour.
+    recording the pair keeps its phase. 0 for depth captured with the colour (synchronised
+    sensors); None where it is not known (the tracker then reads the depth as simultaneous).
     """
 
     fx: float
@@ -88,7 +89,7 @@ class Camera:
     height: int
     depth_scale: float = 0.001
     dist: tuple[float, ...] | None = None
-    depth_delay: float = 0.0
+    depth_delay: float | None = None
 
     def __post_init__(self) -> None:
         # Validate code-built cameras too, so a bad camera fails here and not deep in a filter.
@@ -103,8 +104,10 @@ class Camera:
             value = _check_number(d[field], field, where, positive=True, integer=True)
             object.__setattr__(self, field, value)
         object.__setattr__(self, "dist", _check_dist(d.get("dist"), where))
-        delay = _check_number(d.get("depth_delay", 0.0), "depth_delay_s", where, positive=False)
-        if abs(delay) > MAX_DEPTH_DELAY_S:
+        delay = d.get("depth_delay")
+        if delay is not None:
+            delay = _check_number(delay, "depth_delay_s", where, positive=False)
+        if delay is not None and abs(delay) > MAX_DEPTH_DELAY_S:
             raise ConfigError(
                 f"{where}: field 'depth_delay_s' is {delay:g} s (at most {MAX_DEPTH_DELAY_S:g} "
                 "either way); it is seconds from the colour frame to its depth frame, e.g. 0.008"
@@ -264,7 +267,7 @@ class Camera:
         }
         if self.dist is not None:
             d["dist"] = list(self.dist)
-        if self.depth_delay != 0.0:
+        if self.depth_delay is not None:
             d["depth_delay_s"] = self.depth_delay
         return d
 
@@ -285,7 +288,7 @@ class Camera:
             )
         # Validate with the file name in the message, then build (which re-checks cheaply).
         cam = object.__new__(cls)
-        cam._set_validated({**d, "depth_delay": d.get("depth_delay_s", 0.0)}, where)
+        cam._set_validated({**d, "depth_delay": d.get("depth_delay_s")}, where)
         return cls(**{f: getattr(cam, f) for f in (*REQUIRED_FIELDS, "dist", "depth_delay")})
 
     @classmethod

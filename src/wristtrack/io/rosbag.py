@@ -207,7 +207,7 @@ class BagRecording(Recording):
             period = statistics.median(diffs) if diffs else DEFAULT_PERIOD_NS
             self.sync_tolerance = sync_tolerance if sync_tolerance is not None else period / 2e9
             self.has_depth = self.depth_topic is not None
-            if self.has_depth and self.camera.depth_delay == 0.0:
+            if self.has_depth and self.camera.depth_delay is None:
                 depth_stamps = self._stamps(reader, self.depth_topic, 2 * len(stamps))
                 delay = paired_delay(stamps, depth_stamps, round(self.sync_tolerance * 1e9))
                 if delay is not None and abs(delay) <= MAX_DEPTH_DELAY_S:

@@ -149,9 +149,11 @@ class MarkerObservation:
         self.offset_of = offset_of
         # states (S, D) -> their linear and angular velocities (S, 3) each, in W0: a depth frame
         # captured camera.depth_delay after the colour reads the hand where they have moved it
-        # (:func:`lag_depth_change`); a model without rates (the paper's) reads it as still
+        # (:func:`lag_depth_change`; an unknown delay is taken as none). A model without rates
+        # (the paper's) reads it as still.
         self.rates_of = rates_of
-        self.depth_delay = camera.depth_delay if use_depth and rates_of is not None else 0.0
+        lagged = use_depth and rates_of is not None
+        self.depth_delay = (camera.depth_delay or 0.0) if lagged else 0.0
         if offset_of is not None:
             noise = replace(noise, registration_px=0.0)
         self.noise = noise
@@ -217,11 +219,15 @@ class MarkerObservation:
                 out[..., 2] += depth_offset_change(pts, R_ch[:, None, :, 2], self.offset_of(X),
                                                    self.camera.fx, self.camera.fy)
             if self.depth_delay:  # read in a depth frame captured before or after the colour
-                v, w = self.rates_of(X)
-                v_c, w_c = v @ self.R_c0.T, w @ self.R_c0.T
-                rates = v_c[:, None] + np.cross(w_c[:, None], pts - t_ch[:, None])
-                out[..., 2] += lag_depth_change(pts, R_ch[:, None, :, 2], rates, self.depth_delay)
+                out[..., 2] += self._lag_change(X, R_ch, t_ch, pts, self.depth_delay)
         return out.reshape(X.shape[0], -1)
+
+    def _lag_change(self, X, R_ch, t_ch, pts, delay: float) -> np.ndarray:
+        """:func:`lag_depth_change` of the markers ``pts`` of states X at (R_ch, t_ch)."""
+        v, w = self.rates_of(X)
+        v_c, w_c = v @ self.R_c0.T, w @ self.R_c0.T
+        rates = v_c[:, None] + np.cross(w_c[:, None], pts - t_ch[:, None])
+        return lag_depth_change(pts, R_ch[:, None, :, 2], rates, delay)
 
     def noise_variance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
         """Diagonal measurement noise (6*k,) at the predicted state ``x`` (D,) and measurement

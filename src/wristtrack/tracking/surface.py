@@ -332,11 +332,12 @@ def near_depth_edges(depth: np.ndarray, depth_scale: float, iv: np.ndarray, iu: 
 
 def skin_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
                 surface: DorsumSurface, depth_image: np.ndarray, noise: MeasurementNoise,
-                settings: SurfaceSettings, camera: Camera,
-                params: ukf.UKFParams) -> tuple[np.ndarray, np.ndarray]:
+                settings: SurfaceSettings, camera: Camera, params: ukf.UKFParams,
+                depth_delay: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(x, P) updated with the depth of the skin between the markers, read in the raw depth frame
-    ``depth_image`` at the pose of x (the markers' update's); unchanged where no patch can be
-    read or the update is beyond ``settings.nis_quantile`` (:func:`surface_update`)."""
+    ``depth_image`` (captured ``depth_delay`` s after the colour) at the pose of x (the markers'
+    update's); unchanged where no patch can be read or the update is beyond
+    ``settings.nis_quantile`` (:func:`surface_update`)."""
     R_ch, t_ch = hand_in_camera(*model.pose(x[None]), R_c0, t_c0)
     reading = read_patches(camera, surface, R_ch[0], t_ch[0], depth_image, settings,
                            pixel_rays(camera))
@@ -344,22 +345,24 @@ def skin_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.
         return x, P
     limit = ukf.chi2_quantile(settings.nis_quantile, len(reading.depth))
     x, P, _, _ = surface_update(model, x, P, R_c0, t_c0, surface, reading, noise, settings, camera,
-                                params, limit)
+                                params, limit, depth_delay)
     return x, P
 
 
 def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: np.ndarray,
                    surface: DorsumSurface, reading: PatchReading, noise: MeasurementNoise,
                    settings: SurfaceSettings, camera: Camera, params: ukf.UKFParams,
-                   nis_limit: float) -> tuple[np.ndarray, np.ndarray, float, int]:
+                   nis_limit: float, depth_delay: float = 0.0,
+                   ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """The unscented update of (x, P) with one frame's patch readings, read at the pose of x:
     (x, P, NIS, dof). ``noise`` is the markers' MeasurementNoise (the sensor's depth sigma and
-    the misregistration); an update whose NIS is beyond ``nis_limit`` is not applied."""
+    the misregistration); an update whose NIS is beyond ``nis_limit`` is not applied. The depth
+    frame was captured ``depth_delay`` s after the colour (MarkerObservation.depth_delay)."""
     pts, nrm = surface.points[reading.patches], surface.normals[reading.patches]
     offset_of = getattr(model, "depth_offset", None)  # the misregistration in the state
     shift = None if surface.offset_shift is None else surface.offset_shift[reading.patches]
 
-    rates_of = getattr(model, "rates", None) if camera.depth_delay else None
+    rates_of = getattr(model, "rates", None) if depth_delay else None
 
     def h(X: np.ndarray) -> np.ndarray:
         R_ch, t_ch = hand_in_camera(*model.pose(X), R_c0, t_c0)
@@ -371,7 +374,7 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
         Pw = np.einsum("sij,s...j->s...i", R_ch, np.broadcast_to(skin, (len(X), *pts.shape)))
         if rates_of is not None:  # read where the hand's rates move it over the depth's delay
             v, w = rates_of(X)
-            Pw = Pw + camera.depth_delay * (
+            Pw = Pw + depth_delay * (
                 (v @ R_c0.T)[:, None] + np.cross((w @ R_c0.T)[:, None], Pw))
         z = plane_depths(Pw + t_ch[:, None], Nw, reading.rays[None])
         if o is None:

@@ -385,7 +385,8 @@ class Tracker:
             return out
         x, P = surface.skin_update(self.model, out[0], out[1], self.R_c0, self.t_c0, self.surface,
                                    det.depth_image, self.config.measurement, self.config.surface,
-                                   self.camera, self.config.ukf)
+                                   self.camera, self.config.ukf,
+                                   self._observation(True).depth_delay)
         return (x, P, *out[2:])
 
     def _compiled_frame(self, det: Detections, track: _Track, dt: float) -> tuple | None:
