@@ -112,6 +112,8 @@ def test_report_has_every_section_and_the_run_metadata(run):
     assert (f"blob centres taken at {noise['pixel_sigma_px']:.2f} px (model "
             f"{noise['pixel_sigma_model_px']:.2f} px)") in text
     assert f"skin slide over the knuckles at {noise['skin_slide_sd_factor']:.2f}x" in text
+    assert "depth_delay_s" not in summary["camera"]  # the simulator's default: not stated
+    assert "Depth timing" in text and "not stated: each depth frame taken as captured" in text
     # Self-contained: no external resources, nothing fetched.
     assert not re.search(r"(src|href)=\"(https?:|//|file:)", text)
     assert "@page" in text and "A4" in text and "@media print" in text

@@ -69,6 +69,10 @@ def test_a_stated_depth_delay_brings_a_rendered_reach_back_to_the_truth(tmp_path
         run = tmp_path / f"run_{name}"
         assert main(["track", str(folder), "--out", str(run), "--no-report", "--no-progress"]) == 0
         errors[name] = evaluate(run / "poses.csv", rec / "truth.csv")
+    assert main(["report", str(tmp_path / "run_stated")]) == 0  # and says when depth was read
+    delay_ms = 1e3 * Camera.load(rec / "camera.json").depth_delay
+    assert (f"each depth frame captured {delay_ms:.1f} ms after its colour frame"
+            in (tmp_path / "run_stated" / "report.html").read_text(encoding="utf-8"))
     stated, blind_ = errors["stated"], errors["blind"]
     assert stated["position_rmse_mm"] < 0.6 * blind_["position_rmse_mm"]
     assert stated["orientation_rmse_deg"] < 0.8 * blind_["orientation_rmse_deg"]

@@ -173,6 +173,9 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     noise = summary.get("measurement_noise")
     if noise:  # what the tracker learned of this camera's blobs and this hand's skin
         rows.append(("Noise learned", _learned_noise(noise)))
+    timing = _depth_timing(summary.get("camera") or {}, settings)
+    if timing:
+        rows.append(("Depth timing", timing))
     offset = summary.get("depth_registration")
     if offset:  # --follow-offset: the depth map's offset from the colour image, as estimated
         rows.append(("Depth registration", _registration(offset)))
@@ -195,6 +198,19 @@ def _learned_noise(noise: dict[str, Any]) -> str:
             f"{_fmt(noise.get('pixel_sigma_model_px'), 2)} px){scatter}{correlated}; skin "
             f"slide over the knuckles at {_fmt(noise.get('skin_slide_sd_factor'), 2)}x the "
             "model's")
+
+
+def _depth_timing(camera: dict[str, Any], settings: dict[str, Any]) -> str | None:
+    """When each depth frame was captured against its colour frame (camera.json's
+    depth_delay_s), for a run that used depth."""
+    if not settings.get("use_depth"):
+        return None
+    delay = camera.get("depth_delay_s")
+    if delay is None:
+        return ("not stated: each depth frame taken as captured with its colour frame (give "
+                "camera.json depth_delay_s where the streams are paired by time stamp)")
+    return (f"each depth frame captured {_fmt(1e3 * delay, 1)} ms after its colour frame, read "
+            "where the hand had moved by then")
 
 
 def _registration(offset: dict[str, Any]) -> str:
