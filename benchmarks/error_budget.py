@@ -17,8 +17,8 @@ given
 True depths are the colour frame's moment: their rows track with no depth delay stated, however
 late the rendered depth was (``depth_lag``); the skin between the markers is still read from the
 rendered depth map, as late as it was (with the delay stated instead, the rows came out within
-0.001 deg). The default tracker without the markers' depth is the last row. What a row gains over the first
-is what that source costs.
+0.001 deg). The default tracker without the markers' depth is the last row. What a row gains
+over the first is what that source costs.
 
 Sharp pixels, structured-light depth: on structured-light depth alone the default
 tracker's orientation error is about twice the clean recording's, where OpenCV's per-frame PnP,
