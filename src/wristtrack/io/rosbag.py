@@ -25,7 +25,7 @@ import re
 import statistics
 import warnings
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
@@ -327,22 +327,18 @@ class BagRecording(Recording):
 
     def _colour_stamps(self, reader: Any) -> list[int]:
         """Stamps of the first few colour frames; the first one is decoded to check its size."""
-        stamps: list[int] = []
-        with closing(self._messages(reader, [self.color_topic])) as messages:
-            for _, m in messages:
-                if not stamps:
-                    where = f"{self.where} topic {self.color_topic}"
-                    self.check_size(decode_colour(m, where), where)
-                stamps.append(m.stamp)
-                if len(stamps) >= PERIOD_SAMPLE:
-                    break
-        return stamps
+        where = f"{self.where} topic {self.color_topic}"
+        return self._stamps(reader, self.color_topic, PERIOD_SAMPLE,
+                            lambda m: self.check_size(decode_colour(m, where), where))
 
-    def _stamps(self, reader: Any, topic: str, count: int) -> list[int]:
-        """Stamps of the first ``count`` messages on ``topic``."""
+    def _stamps(self, reader: Any, topic: str, count: int,
+                first: Callable[[RosMessage], object] | None = None) -> list[int]:
+        """Stamps of the first ``count`` messages on ``topic``, ``first`` called on the first."""
         stamps: list[int] = []
         with closing(self._messages(reader, [topic])) as messages:
             for _, m in messages:
+                if first is not None and not stamps:
+                    first(m)
                 stamps.append(m.stamp)
                 if len(stamps) >= count:
                     break

@@ -219,15 +219,10 @@ class MarkerObservation:
                 out[..., 2] += depth_offset_change(pts, R_ch[:, None, :, 2], self.offset_of(X),
                                                    self.camera.fx, self.camera.fy)
             if self.depth_delay:  # read in a depth frame captured before or after the colour
-                out[..., 2] += self._lag_change(X, R_ch, t_ch, pts, self.depth_delay)
+                rates = point_rates(*self.rates_of(X), self.R_c0, pts - t_ch[:, None])
+                out[..., 2] += lag_depth_change(pts, R_ch[:, None, :, 2], rates,
+                                                self.depth_delay)
         return out.reshape(X.shape[0], -1)
-
-    def _lag_change(self, X, R_ch, t_ch, pts, delay: float) -> np.ndarray:
-        """:func:`lag_depth_change` of the markers ``pts`` of states X at (R_ch, t_ch)."""
-        v, w = self.rates_of(X)
-        v_c, w_c = v @ self.R_c0.T, w @ self.R_c0.T
-        rates = v_c[:, None] + np.cross(w_c[:, None], pts - t_ch[:, None])
-        return lag_depth_change(pts, R_ch[:, None, :, 2], rates, delay)
 
     def noise_variance(self, x: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
         """Diagonal measurement noise (6*k,) at the predicted state ``x`` (D,) and measurement
@@ -326,6 +321,13 @@ def _along_normal(points: np.ndarray, normals: np.ndarray, grazing_cos: float) -
     d = np.einsum("...j,...j->...", points, normals)
     steepest = grazing_cos * np.linalg.norm(points, axis=-1)
     return np.where(d < 0.0, np.minimum(d, -steepest), np.maximum(d, steepest))
+
+
+def point_rates(v: np.ndarray, w: np.ndarray, R_c0: np.ndarray, arms: np.ndarray) -> np.ndarray:
+    """(S, K, 3) camera-frame velocities of points ``arms`` (S, K, 3) from the hand's origin
+    (camera axes) on hands moving at v and turning at w ((S, 3) each, W0, a state's rates):
+    R_c0 v + (R_c0 w) x arm."""
+    return (v @ R_c0.T)[:, None] + np.cross((w @ R_c0.T)[:, None], arms)
 
 
 def lag_depth_change(points: np.ndarray, normals: np.ndarray, rates: np.ndarray,

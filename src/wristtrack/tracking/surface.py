@@ -54,6 +54,7 @@ from wristtrack.tracking.observation import (
     MeasurementNoise,
     depth_offset_change,
     hand_in_camera,
+    point_rates,
     registration_depth_jacobian,
 )
 
@@ -373,9 +374,7 @@ def surface_update(model, x: np.ndarray, P: np.ndarray, R_c0: np.ndarray, t_c0: 
             pts[None] - nrm[None] * (o @ shift.T)[..., None])
         Pw = np.einsum("sij,s...j->s...i", R_ch, np.broadcast_to(skin, (len(X), *pts.shape)))
         if rates_of is not None:  # read where the hand's rates move it over the depth's delay
-            v, w = rates_of(X)
-            Pw = Pw + depth_delay * (
-                (v @ R_c0.T)[:, None] + np.cross((w @ R_c0.T)[:, None], Pw))
+            Pw = Pw + depth_delay * point_rates(*rates_of(X), R_c0, Pw)
         z = plane_depths(Pw + t_ch[:, None], Nw, reading.rays[None])
         if o is None:
             return z
