@@ -4,7 +4,7 @@ FilterPy's UKF and the Stone Soup tracker on the same model and frames."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -14,6 +14,8 @@ from wristtrack.tracking import compiled
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.observation import MarkerObservation
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
+
+DELAY_S = 0.012  # a depth delay within half a frame at 30 fps, for the delay row
 
 
 @dataclass
@@ -30,6 +32,9 @@ class StepTiming:
     as_noise_ms: float = float("nan")
     # with the depth map's offset in the state too (--follow-offset): 16
     offset_ms: float = float("nan")
+    # the default with a depth delay stated (camera.json depth_delay_s): each depth read where
+    # the hand's rates move it
+    delay_ms: float = float("nan")
 
 
 class _GenericTracker(Tracker):
@@ -64,12 +69,14 @@ def time_tracker_step(n_frames: int = 300, seed: int = 0, stonesoup_frames: int 
     generic = _time_steps(_GenericTracker(camera, layout, TrackerConfig()), frames3)
     as_noise = _time_steps(Tracker(camera, layout, TrackerConfig(follow_slide=False)), frames3)
     offset = _time_steps(Tracker(camera, layout, TrackerConfig(follow_offset=True)), frames3)
+    delay = _time_steps(Tracker(replace(camera, depth_delay=DELAY_S), layout, TrackerConfig()),
+                        frames3)
     peer = _time_filterpy(tracker, frames, camera, layout)
     soup = _time_stonesoup(frames3[: stonesoup_frames + 1], camera, layout)
     return StepTiming(
         ours * 1e3, None if peer is None else peer * 1e3, len(frames3) - 1,
         None if soup is None else soup * 1e3, stonesoup_frames, generic * 1e3, kind,
-        as_noise * 1e3, offset * 1e3,
+        as_noise * 1e3, offset * 1e3, delay * 1e3,
     )  # fmt: skip
 
 
@@ -161,8 +168,10 @@ def step_section(step: StepTiming) -> list[str]:
         f"({step.kind}), its generic NumPy step (the reference, which every other "
         "configuration runs), the step with the skin slide as shared noise "
         "(`--no-follow-slide`: FilterPy's 12 states; the default carries the slide along the "
-        "hand too, 14) and with the depth map's offset from the colour image in the state "
-        "as well (`--follow-offset`: 16) on the same frames.",
+        "hand too, 14), with the depth map's offset from the colour image in the state "
+        "as well (`--follow-offset`: 16) and with a depth delay stated (camera.json "
+        f"`depth_delay_s` {DELAY_S * 1e3:g} ms: each depth read where the hand's rates move "
+        "it) on the same frames.",
         "",
         "| | median per step (ms) | FilterPy's time / this one |",
         "|---|---|---|",
@@ -174,6 +183,8 @@ def step_section(step: StepTiming) -> list[str]:
         f"{step.as_noise_ms:.3f} | {faster(step.filterpy_ms, step.as_noise_ms)} |",
         f"| wristtrack step, depth offset in the state ({step.kind}) | {step.offset_ms:.3f} | "
         f"{faster(step.filterpy_ms, step.offset_ms)} |",
+        f"| wristtrack step, depth delay stated ({step.kind}) | {step.delay_ms:.3f} | "
+        f"{faster(step.filterpy_ms, step.delay_ms)} |",
         f"| FilterPy UKF predict+update | {_ms(step.filterpy_ms)} | 1x |",
         f"| Stone Soup tracker step (UKF predict, PDA over the same 9 blobs for each marker, "
         f"update; median over {step.stonesoup_frames} frames) | {_ms(step.stonesoup_ms)} | "
