@@ -10,6 +10,7 @@ the rounding of the larger ones it was computed from), far below 1e-9 of that no
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from dataclasses import replace
@@ -220,12 +221,16 @@ def _assert_same_results(first, second) -> None:
 
 def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0.0) -> list:
     """Track scenario ``name`` (acceptance noise) as seen through a lens with distortion
-    ``lens`` (None: a pinhole), depth captured ``delay`` s after the colour."""
+    ``lens`` (None: a pinhole), depth captured ``delay`` s after the colour; ``"stamped"``:
+    each frame's own delay (Detections.depth_delay), within +-16 ms, changing every frame."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario(name, rng=rng)
-    camera = replace(camera, dist=lens, depth_delay=delay)
+    camera = replace(camera, dist=lens, depth_delay=None if delay == "stamped" else delay)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
     tracker = Tracker(camera, layout, config)
+    if delay == "stamped":
+        return [tracker.step(replace(f.detections, depth_delay=0.016 * math.sin(k)))
+                for k, f in enumerate(frames)]
     return [tracker.step(f.detections) for f in frames]
 
 
@@ -233,6 +238,7 @@ def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0
     ("pronation", "rigid", None, 0.0), ("mix", "rigid", None, 0.0), ("mix", "slide", None, 0.0),
     ("mix", "offset", None, 0.0), ("mix", "rigid", XTION_LENS, 0.0),
     ("pronation", "offset", XTION_LENS, 0.0), ("mix", "slide", None, 0.014),
+    ("mix", "slide", None, "stamped"),
 ])  # fmt: skip
 def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, states, lens,
                                                         delay):

@@ -17,8 +17,12 @@ from wristtrack.analysis.evaluate import evaluate
 from wristtrack.camera import Camera
 from wristtrack.cli import main
 from wristtrack.hand import HandLayout
+from wristtrack.sim.detections import NoiseModel, simulate_detections
+from wristtrack.sim.motion import sample, scenario_motion
 from wristtrack.tracking.models import ConstantRateModel
 from wristtrack.tracking.observation import MarkerObservation
+from wristtrack.tracking.results import Status
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 
 def test_a_lagged_depth_is_the_depth_of_the_moved_skin_along_the_markers_ray():
@@ -76,3 +80,62 @@ def test_a_stated_depth_delay_brings_a_rendered_reach_back_to_the_truth(tmp_path
     stated, blind_ = errors["stated"], errors["blind"]
     assert stated["position_rmse_mm"] < 0.6 * blind_["position_rmse_mm"]
     assert stated["orientation_rmse_deg"] < 0.8 * blind_["orientation_rmse_deg"]
+
+
+def _lagged_reach(delays: np.ndarray) -> tuple:
+    """The first frames of the reach scenario as a detector would see them, each frame's depths
+    read ``delays[k]`` s after its colour (the skin's depth along each marker's ray then); the
+    scenario's camera (no delay stated) and hand."""
+    motion, (R_c0, t_c0) = scenario_motion("reach")
+    times = np.arange(len(delays)) / 30.0
+    truth, later = sample(motion, times, R_c0, t_c0), sample(motion, times + delays, R_c0, t_c0)
+    camera, layout = Camera.default(), HandLayout.default()
+    noise = NoiseModel(clutter_mean=0.0, p_miss=0.0)
+    frames = []
+    for k, sim in enumerate(simulate_detections(truth, camera, layout, noise, rng=3)):
+        det, points = sim.detections, layout.points[sim.labels]
+        now = points @ truth.R_ch[k].T + truth.t_ch[k]
+        moved, normal = points @ later.R_ch[k].T + later.t_ch[k], later.R_ch[k][:, 2]
+        lagged = (moved @ normal) / ((now / now[:, 2:]) @ normal) + (det.depth - now[:, 2])
+        frames.append(replace(det, depth=lagged))
+    return frames, camera, layout
+
+
+def _track(camera: Camera, layout: HandLayout, frames: list, delays=None) -> tuple:
+    """Each frame's camera pose (R (N, 3, 3), t (N, 3)), the frames given ``delays[k]`` as
+    their own (Detections.depth_delay); and the tracker."""
+    tracker = Tracker(camera, layout, TrackerConfig())
+    results = [tracker.step(replace(det, depth_delay=None if delays is None else delays[k]))
+               for k, det in enumerate(frames)]
+    assert all(r.status == Status.TRACKING for r in results[1:])
+    return np.array([r.R_ch for r in results]), np.array([r.t_ch for r in results]), tracker
+
+
+def test_each_frames_stamped_delay_is_read_as_a_stated_one_and_a_stated_one_wins():
+    """A camera stamps each depth frame (a RealSense, an OpenNI2 device, a ROS bag), and each
+    frame is read at its own delay (Detections.depth_delay) as camera.json's depth_delay_s would
+    have it read: the same poses for depth 12 ms late throughout. Where the two clocks' phase
+    slips past half a frame, the nearest depth frame becomes the one before: from that frame on
+    the poses leave the 12 ms ones. A delay camera.json states wins over the frames' own."""
+    n, slip = 75, 60  # the hand starts moving at frame 45
+    late = np.full(n, 0.012)
+    frames, camera, layout = _lagged_reach(late)
+    R_stated, t_stated, _ = _track(replace(camera, depth_delay=0.012), layout, frames)
+    R_own, t_own, tracker = _track(camera, layout, frames, late)
+    np.testing.assert_allclose(t_own, t_stated, atol=1e-12)
+    np.testing.assert_allclose(R_own, R_stated, atol=1e-12)
+    assert tracker.depth_timing.to_dict() == {"from": "frame stamps", "frames": n,
+                                              "delay_ms": 12.0, "min_ms": 12.0, "max_ms": 12.0}
+    _, t_none, _ = _track(camera, layout, frames)
+    assert np.abs(t_none - t_own)[50:].max() > 5e-5  # the delay moves the moving hand's poses
+
+    slipped = np.where(np.arange(n) < slip, 0.012, -0.021)
+    _, t_slip, tracker = _track(camera, layout, frames, slipped)
+    np.testing.assert_allclose(t_slip[:slip], t_own[:slip], atol=1e-12)
+    assert np.abs(t_slip[slip] - t_own[slip]).max() > 1e-5
+    assert tracker.depth_timing.to_dict()["min_ms"] == -21.0
+
+    stated = replace(camera, depth_delay=-0.005)
+    _, t_wins, tracker = _track(stated, layout, frames, late)
+    np.testing.assert_array_equal(t_wins, _track(stated, layout, frames)[1])
+    assert tracker.depth_timing.to_dict() == {"from": "camera.json", "delay_ms": -5.0}

@@ -22,6 +22,9 @@ class Detections:
     blobs whose centre the detector doubts (``Blob.suspect``: clipped, split, elongated, on the
     border, a streak, in the shade), or is None: none doubted. The tracker takes a suspect
     centre at the model's pixel noise, never at the lower noise it learns from the other blobs.
+    ``depth_delay`` (s) is how long after the colour frame its depth frame was captured, as the
+    source's two stamps tell it (``Frame.depth_delay``), or None: not known for this frame
+    (tracking/depth_timing.py).
     """
 
     timestamp: float
@@ -29,6 +32,7 @@ class Detections:
     depth: np.ndarray | None = None
     depth_image: np.ndarray | None = field(default=None, repr=False, compare=False)
     suspect: np.ndarray | None = None
+    depth_delay: float | None = None
 
     def __post_init__(self) -> None:
         uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
@@ -60,6 +64,9 @@ class Detections:
             )
         if not np.isfinite(self.timestamp):
             raise InputError(f"detections timestamp {self.timestamp} is not a finite number")
+        if self.depth_delay is not None:
+            delay = float(self.depth_delay)
+            object.__setattr__(self, "depth_delay", delay if np.isfinite(delay) else None)
 
     @property
     def count(self) -> int:

@@ -139,9 +139,11 @@ class MarkerDetector(MarkerLearning, TrackingWindow):
                 f"frame {bgr.shape[:2]}; depth must be registered to colour, (H, W) uint16"
             )
 
-    def detect(self, bgr: np.ndarray, depth: np.ndarray | None, timestamp: float) -> Detections:
+    def detect(self, bgr: np.ndarray, depth: np.ndarray | None, timestamp: float,
+               depth_delay: float | None = None) -> Detections:
         """Blob centres (sub-pixel) and depths (metres, trimmed mean; NaN where no valid pixel;
-        None without a depth frame) of one frame; details in :attr:`last_blobs`."""
+        None without a depth frame) of one frame; details in :attr:`last_blobs`.
+        ``depth_delay``: the frame's (``Frame.depth_delay``), passed on to the tracker."""
         self._check(bgr, depth)
         h, w = bgr.shape[:2]
         blobs = None
@@ -188,7 +190,8 @@ class MarkerDetector(MarkerLearning, TrackingWindow):
         uv = np.array([b.uv for b in blobs], dtype=float).reshape(-1, 2)
         d = None if depth is None else np.array([b.depth for b in blobs], dtype=float)
         suspect = np.array([b.suspect for b in blobs], dtype=bool)
-        return Detections(timestamp, uv, d, depth_image=depth, suspect=suspect)
+        return Detections(timestamp, uv, d, depth_image=depth, suspect=suspect,
+                          depth_delay=depth_delay)
 
     def _short(self, blobs: list[Blob]) -> bool:
         """Fewer blobs than the last frame had markers (at most six): some may be missed."""

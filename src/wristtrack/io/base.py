@@ -37,6 +37,9 @@ class Frame:
     ``timestamp`` is in seconds; metres of depth = raw * camera.depth_scale (0 = no reading).
     A bad frame (unreadable, wrong size, ...) has ``error`` set to a one-line message and an
     empty (0,0,3) image: skip it. ``timestamp`` is then the listed one, or NaN if unknown.
+    ``depth_delay`` (s): how long after the colour image the depth image was captured, where
+    the source stamps both (a RealSense or OpenNI2 camera, a ROS bag), else None
+    (tracking/depth_timing.py).
     """
 
     index: int
@@ -44,6 +47,7 @@ class Frame:
     bgr: np.ndarray
     depth: np.ndarray | None = None
     error: str | None = None
+    depth_delay: float | None = None
 
     @classmethod
     def bad(cls, index: int, timestamp: float, error: str) -> Frame:

@@ -74,7 +74,7 @@ def track_frame(frame: Frame, run: RunState, labels: Any, rows: Rows) -> Detecti
         note_bad(rows.bar, run.bad_frames, frame.index, frame.error)
         rows.skipped(frame.index, frame.timestamp, 0, "bad_frame")
         return None
-    det = run.detector.detect(frame.bgr, frame.depth, frame.timestamp)
+    det = run.detector.detect(frame.bgr, frame.depth, frame.timestamp, frame.depth_delay)
     track_detections(frame.index, frame.timestamp, det, run, labels, rows, frame.bgr)
     return det
 

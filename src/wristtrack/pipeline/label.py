@@ -163,7 +163,7 @@ def detect_frame(recording: Recording, index: int) -> tuple[Frame, Detections]:
         raise InputError(f"frame {index}: give a frame index >= 0")
     detector = MarkerDetector(recording.camera)
     for frame in recording:
-        det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
+        det = detector.detect(frame.bgr, frame.depth, frame.timestamp, frame.depth_delay)
         if frame.index == index:
             return frame, det
     raise InputError(

@@ -173,7 +173,7 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     noise = summary.get("measurement_noise")
     if noise:  # what the tracker learned of this camera's blobs and this hand's skin
         rows.append(("Noise learned", _learned_noise(noise)))
-    timing = _depth_timing(summary.get("camera") or {}, settings)
+    timing = _depth_timing(summary, settings)
     if timing:
         rows.append(("Depth timing", timing))
     offset = summary.get("depth_registration")
@@ -200,17 +200,27 @@ def _learned_noise(noise: dict[str, Any]) -> str:
             "model's")
 
 
-def _depth_timing(camera: dict[str, Any], settings: dict[str, Any]) -> str | None:
-    """When each depth frame was captured against its colour frame (camera.json's
-    depth_delay_s), for a run that used depth."""
+def _depth_timing(summary: dict[str, Any], settings: dict[str, Any]) -> str | None:
+    """When each depth frame was captured against its colour frame (summary.json's
+    depth_timing; camera.json's depth_delay_s in runs from before it), for a run that used
+    depth."""
     if not settings.get("use_depth"):
         return None
-    delay = camera.get("depth_delay_s")
-    if delay is None:
-        return ("not stated: each depth frame taken as captured with its colour frame (give "
-                "camera.json depth_delay_s where the streams are paired by time stamp)")
-    return (f"each depth frame captured {_fmt(1e3 * delay, 1)} ms after its colour frame, read "
-            "where the hand had moved by then")
+    timing = summary.get("depth_timing")
+    if timing is None:
+        delay = (summary.get("camera") or {}).get("depth_delay_s")
+        timing = {"from": "not stated"} if delay is None else \
+            {"from": "camera.json", "delay_ms": 1e3 * delay}
+    moved = "read where the hand had moved by then"
+    if timing["from"] == "camera.json":
+        return (f"each depth frame captured {_fmt(timing['delay_ms'], 1)} ms after its colour "
+                f"frame (camera.json), {moved}")
+    if timing["from"] == "frame stamps":
+        return (f"each depth frame captured {_fmt(timing['delay_ms'], 1)} ms after its colour "
+                f"frame on average ({_fmt(timing['min_ms'], 1)} to {_fmt(timing['max_ms'], 1)} "
+                f"ms, from the camera's stamps of {timing['frames']} frames), each {moved}")
+    return ("not stated: each depth frame taken as captured with its colour frame (give "
+            "camera.json depth_delay_s where the streams are paired by time stamp)")
 
 
 def _registration(offset: dict[str, Any]) -> str:

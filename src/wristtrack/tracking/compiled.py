@@ -69,10 +69,16 @@ from wristtrack.tracking.slide_model import SlidingSkinModel
 if TYPE_CHECKING:
     from wristtrack.tracking.observation import MarkerObservation
 
-__all__ = ["DECLINED", "MODELS", "OK", "describe", "frame_constants", "load"]
+__all__ = ["DECLINED", "MODELS", "OK", "describe", "frame_constants", "load", "set_depth_delay"]
 
 # The state models the step carries (exactly these: a subclass may change what they compute)
 MODELS = (ConstantRateModel, SlidingSkinModel, DepthOffsetModel)
+
+
+def set_depth_delay(constants: tuple, delay: float) -> None:
+    """The depth of the next frames read ``delay`` s after the colour
+    (MarkerObservation.depth_delay), in ``frame_constants``' result."""
+    constants[-1][_DEPTH_DELAY] = delay
 
 
 def frame_constants(

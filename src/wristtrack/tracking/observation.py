@@ -148,12 +148,12 @@ class MarkerObservation:
         # state carries it (tracking/offset_model.py): the misregistration is then no noise
         self.offset_of = offset_of
         # states (S, D) -> their linear and angular velocities (S, 3) each, in W0: a depth frame
-        # captured camera.depth_delay after the colour reads the hand where they have moved it
+        # captured depth_delay after the colour reads the hand where they have moved it
         # (:func:`lag_depth_change`; an unknown delay is taken as none). A model without rates
         # (the paper's) reads it as still.
         self.rates_of = rates_of
-        lagged = use_depth and rates_of is not None
-        self.depth_delay = (camera.depth_delay or 0.0) if lagged else 0.0
+        self.lagged = use_depth and rates_of is not None
+        self.read_depth_at(camera.depth_delay or 0.0)
         if offset_of is not None:
             noise = replace(noise, registration_px=0.0)
         self.noise = noise
@@ -207,6 +207,11 @@ class MarkerObservation:
         if self.slide_of is not None:
             pts[:, self.sliding] += (R_ch @ self.slide_of(X)[:, :, None])[:, None, :, 0]
         return pts
+
+    def read_depth_at(self, delay: float) -> None:
+        """The depth read ``delay`` s after the colour from now on (the frame's own delay:
+        tracking/depth_timing.py); none where the observation reads no depth or no rates."""
+        self.depth_delay = delay if self.lagged else 0.0
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
         R_ch, t_ch = hand_in_camera(*self.pose(X), self.R_c0, self.t_c0)

@@ -38,6 +38,7 @@ from wristtrack.geometry import relative_pose, so3_log
 from wristtrack.hand import HandLayout, fit_pose, marker_image_diameter
 from wristtrack.tracking import compiled, hypotheses, noise_scale, retries, surface
 from wristtrack.tracking.config import TrackerConfig
+from wristtrack.tracking.depth_timing import DepthTiming
 from wristtrack.tracking.generic_step import fit_covariance, generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
 from wristtrack.tracking.models import ConstantRateModel
@@ -112,6 +113,7 @@ class Tracker:
         self._flip: hypotheses.PlanarHypotheses | None = None
         self._camera_state: tuple = (None, None)  # the last track's (x, P), for its depth offset
         self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
+        self.depth_timing = DepthTiming(self.camera.depth_delay)  # each frame's depth delay
 
     def __getstate__(self) -> dict:
         """Pickled without the compiled step: a numba function whose helpers are compiled only
@@ -141,6 +143,10 @@ class Tracker:
             )
         self._frame += 1
         self._last_timestamp = det.timestamp
+        timing = self.__dict__.setdefault("depth_timing", DepthTiming(self.camera.depth_delay))
+        delay = timing.delay(det)  # (setdefault: checkpoints from before it)
+        for obs in self._obs.values():
+            obs.read_depth_at(delay)
         track = self._track
         if track is not None and det.timestamp - track.timestamp > self.config.max_gap:
             self._lose()
@@ -291,6 +297,7 @@ class Tracker:
                 use_depth, self.config.measurement, getattr(self.model, "skin_slide", None),
                 getattr(self.model, "depth_offset", None), getattr(self.model, "rates", None))
             self.learned_noise.apply(self._obs[use_depth])
+            self._obs[use_depth].read_depth_at(self.depth_timing.current)
         return self._obs[use_depth]
 
     def _learn_noise(self, det: Detections, x, P, labels: np.ndarray, dt: float) -> None:
@@ -414,7 +421,9 @@ class Tracker:
         step, args = self._compiled
         # contiguous blobs and a float dt: numba compiles once per argument type
         uv, depth = np.ascontiguousarray(det.uv), np.ascontiguousarray(det.depth)
-        var = self._observation(True).blob_variance(det.suspect, det.count)
+        obs = self._observation(True)
+        compiled.set_depth_delay(args, obs.depth_delay)
+        var = obs.blob_variance(det.suspect, det.count)
         code, x, P, labels, n_pairs, nis = step(track.x, track.P, float(dt), uv, depth, var, *args)
         if code != compiled.OK:
             return None
