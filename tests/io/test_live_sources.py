@@ -6,6 +6,7 @@ import gc
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -92,13 +93,14 @@ def _rs():
 
 
 def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, lost_depth=(),
-                              baseline=0.0):
+                              baseline=0.0, depth_lag=lambda i: 0.0, domain="hardware_clock"):
     """Record the first ``n`` frames of a recording folder through the SDK: a software device
     with a colour and a depth sensor (the folder's intrinsics, identity extrinsics, as
     registered depth is, or the depth sensor ``baseline`` metres beside the colour one, so
     the reader aligns them), recorded by the SDK's own recorder; the depth frames
-    ``lost_depth`` never reach it (as a USB transfer a device drops). Returns the folder's
-    camera."""
+    ``lost_depth`` never reach it (as a USB transfer a device drops). Depth frame i is stamped
+    ``depth_lag(i)`` s after its colour frame, both in the timestamp ``domain``. Returns the
+    folder's camera."""
     rs = _rs()
     rec = FolderRecording(folder)
     cam = rec.camera
@@ -140,8 +142,9 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
                 continue
             sw = rs.software_video_frame()
             sw.pixels, sw.bpp, sw.stride = np.ascontiguousarray(image), bpp, cam.width * bpp
-            sw.timestamp, sw.frame_number, sw.profile = frame.timestamp * 1e3, i, profile
-            sw.domain = rs.timestamp_domain.hardware_clock
+            lag = depth_lag(i) if bpp == 2 else 0.0
+            sw.timestamp, sw.frame_number, sw.profile = (frame.timestamp + lag) * 1e3, i, profile
+            sw.domain = getattr(rs.timestamp_domain, domain)
             if bpp == 2:
                 sw.depth_units = scale
             sensor.on_video_frame(sw)
@@ -272,10 +275,11 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
                  str(tmp_path / "live"), "--no-report"]) == 0
     live = read_poses(tmp_path / "live" / "poses.csv")
     log = json.loads((tmp_path / "live" / "live.json").read_text())
-    assert log["frames"]["total"] == len(live["frame"]) >= 10
-    assert (live["status"] == "tracking").sum() >= 9
+    assert log["frames"]["total"] == len(live["frame"])
     # each live row is a frame of the recording, in order; a dropped one was never tracked
+    # (the SDK's real-time playback may drop the frames behind the slow first one)
     taken = live["status"] != "dropped"
+    assert taken.sum() >= 6 and (live["status"] == "tracking").sum() >= taken.sum() - 3
     recorded = live["timestamp"][taken]
     lines = (reach / "frames.csv").read_text().splitlines()
     stamps = np.array([float(line.split(",")[0]) for line in lines[1:]])
@@ -326,6 +330,88 @@ def test_track_reads_a_realsense_recording_offline_frame_by_frame(reach, realsen
         np.testing.assert_allclose(bag[col], off[col], atol=1e-6)
     for col in ("deviation_deg", "flexion_deg", "pronation_deg"):
         np.testing.assert_allclose(bag[col], off[col], atol=1e-4)
+
+
+def test_realsense_depth_stamps_tell_each_frames_depth_delay(short, tmp_path):
+    """The depth sensor's stamps 6 ms after the colour's, slipping 0.5 ms a frame (two clocks):
+    each frame carries its own delay. Stamps of the host's arrival (system time, as without
+    the SDK's kernel patches) say nothing of the capture: no delay."""
+    lag = lambda i: 0.006 + 0.0005 * i  # noqa: E731
+    write_realsense_recording(tmp_path / "lag.db3", short, n=6, depth_lag=lag)
+    with open_recording(tmp_path / "lag.db3") as rec:
+        frames = list(rec.frames())
+    assert [f.index for f in frames] == list(range(6)) and all(f.depth is not None
+                                                              for f in frames)
+    np.testing.assert_allclose([f.depth_delay for f in frames], [lag(i) for i in range(6)],
+                               atol=1e-6)  # stamps pass through the SDK as float ms
+    write_realsense_recording(tmp_path / "host.db3", short, n=4, depth_lag=lag,
+                              domain="system_time")
+    with open_recording(tmp_path / "host.db3") as rec:
+        frames = list(rec.frames())
+    assert len(frames) == 4 and all(f.depth is not None and f.depth_delay is None
+                                    for f in frames)
+
+
+def test_track_reads_each_depth_at_its_stamped_delay(reach, cut_recording, tmp_path):
+    """A recording whose depth is stamped 8 ms after the colour is tracked as the same frames
+    with camera.json stating that delay (the tracker's lag model applied to each frame), not
+    as they are without it; summary.json and the report say where the delay came from."""
+    write_realsense_recording(tmp_path / "lag.db3", reach, depth_lag=lambda i: 0.008)
+    assert main(["track", str(tmp_path / "lag.db3"), "--out", str(tmp_path / "bag"),
+                 "--no-progress"]) == 0
+    folders = {}
+    for name, delay in (("stated", 0.008), ("none", None)):
+        folders[name] = cut_recording(reach, range(12), tmp_path / name, hand=False)
+        camera = json.loads((folders[name] / "camera.json").read_text())
+        camera.pop("depth_delay_s", None)
+        if delay is not None:
+            camera["depth_delay_s"] = delay
+        (folders[name] / "camera.json").write_text(json.dumps(camera))
+        assert main(["track", str(folders[name]), "--out", str(tmp_path / f"off-{name}"),
+                     "--no-report", "--no-progress"]) == 0
+    bag = read_poses(tmp_path / "bag" / "poses.csv")
+    stated = read_poses(tmp_path / "off-stated" / "poses.csv")
+    none = read_poses(tmp_path / "off-none" / "poses.csv")
+    np.testing.assert_array_equal(bag["status"], stated["status"])
+    tracked = bag["status"] == "tracking"
+    assert tracked.sum() >= 9
+    for col in ("tx", "ty", "tz"):  # as the recording-folder test, to the SDK's float stamps
+        np.testing.assert_allclose(bag[col], stated[col], atol=1e-6)
+    moved = max(np.nanmax(np.abs(bag[c] - none[c])) for c in ("tx", "ty", "tz"))
+    assert moved > 1e-5, moved  # the delay changed the poses
+    summary = json.loads((tmp_path / "bag" / "summary.json").read_text())
+    timing = summary["depth_timing"]
+    assert timing["from"] == "frame stamps" and timing["frames"] == 12
+    assert timing["delay_ms"] == pytest.approx(8.0, abs=1e-3)
+    assert timing["min_ms"] == pytest.approx(8.0, abs=1e-3)
+    off = json.loads((tmp_path / "off-stated" / "summary.json").read_text())["depth_timing"]
+    assert off == {"from": "camera.json", "delay_ms": 8.0}
+    report = (tmp_path / "bag" / "report.html").read_text(encoding="utf-8")
+    assert ("captured 8.0 ms after its colour frame on average (8.0 to 8.0 ms, from the "
+            "camera&#x27;s stamps of 12 frames)") in report
+
+
+def test_a_live_session_records_its_cameras_depth_delay(reach, tmp_path):
+    """--record writes a folder, which has one stamp per frame: the median of the frames'
+    stamped depth delays goes into its camera.json, so the folder is tracked offline as the
+    camera was live. A camera that states its delay keeps it."""
+    from wristtrack.io.live.record import LiveRecorder
+
+    lag = lambda i: 0.007 + 0.0002 * (i % 3)  # noqa: E731
+    write_realsense_recording(tmp_path / "lag.db3", reach, depth_lag=lag)
+    assert main(["track", "--live", f"realsense:{tmp_path / 'lag.db3'}", "--out",
+                 str(tmp_path / "live"), "--record", str(tmp_path / "rec"), "--no-report"]) == 0
+    assert Camera.load(tmp_path / "rec" / "camera.json").depth_delay == pytest.approx(0.0072)
+    live = json.loads((tmp_path / "live" / "live.json").read_text())
+    assert live["record"]["depth_delay_s"] == pytest.approx(0.0072)
+    timing = json.loads((tmp_path / "live" / "summary.json").read_text())["depth_timing"]
+    assert timing["from"] == "frame stamps"
+    assert (timing["min_ms"], timing["max_ms"]) == pytest.approx((7.0, 7.4))
+    frame = next(iter(FolderRecording(reach).frames()))
+    stated = replace(Camera.load(reach / "camera.json"), depth_delay=-0.003)
+    with LiveRecorder(tmp_path / "stated", stated) as recorder:
+        recorder.put(frame.timestamp, frame.bgr, frame.depth, 0.009)
+    assert Camera.load(tmp_path / "stated" / "camera.json").depth_delay == -0.003
 
 
 def test_realsense_without_a_device_or_library_is_one_line(monkeypatch, tmp_path):
@@ -487,7 +573,8 @@ def test_recorder_reports_a_write_failure_and_goes_on(short, tmp_path):
 
 def test_openni_colour_and_depth_frames_are_paired_by_time():
     """The order the dummy driver delivers in (D1 C1 D2 D3 C2 D4 C3 C4 ...), and a lost depth:
-    each colour frame gets the depth of its own moment, or none."""
+    each colour frame gets the depth of its own moment, or none; and how long after the colour
+    that depth was stamped (the depth sensor 5 ms behind, slipping 1 ms a frame)."""
     from collections import deque
 
     from wristtrack.io.live.openni import _pair
@@ -496,7 +583,12 @@ def test_openni_colour_and_depth_frames_are_paired_by_time():
     arrivals = "D1 C1 D2 D3 C2 D4 C3 C4 C5 D6 C6 D7 C7".split()  # D5 lost
     for item in arrivals:
         kind, k = item[0], int(item[1:])
-        (depths if kind == "D" else colors).append((np.full((1, 1), k), k / 30))
-        paired += [(int(c[0, 0]), None if d is None else int(d[0, 0]))
-                   for c, _, d in _pair(colors, depths, 0.5 / 30, True)]
-    assert paired == [(1, 1), (2, 2), (3, 3), (4, 4), (5, None), (6, 6), (7, 7)]
+        t = k / 30 + (0.005 + 0.001 * k if kind == "D" else 0.0)
+        (depths if kind == "D" else colors).append((np.full((1, 1), k), t))
+        paired += [(int(c[0, 0]), None if d is None else int(d[0, 0]), delay)
+                   for c, _, d, delay in _pair(colors, depths, 0.5 / 30, True)]
+    assert [p[:2] for p in paired] == [(1, 1), (2, 2), (3, 3), (4, 4), (5, None), (6, 6), (7, 7)]
+    delays = [p[2] for p in paired]
+    assert delays[4] is None
+    np.testing.assert_allclose([d for d in delays if d is not None],
+                               [0.005 + 0.001 * k for k in (1, 2, 3, 4, 6, 7)], atol=1e-12)

@@ -27,7 +27,6 @@ from wristtrack.io.folder import RecordingWriter
 from wristtrack.io.live import opencv as live_module
 from wristtrack.io.open import open_recording
 from wristtrack.io.ros_messages import IMAGE, RosMessage, decode_colour, decode_depth
-from wristtrack.io.rosbag import paired_delay
 
 try:  # the test extra installs rosbags; without it only the ROS bag tests are skipped
     from rosbags.rosbag1 import Writer as Writer1
@@ -469,8 +468,10 @@ def write_rgbd_bag(path: Path, ros: int, *, color="/camera/color/image_raw",
             bag.info("/camera/depth/camera_info", stamp - 1000, k=(60, 0, 30, 0, 60, 20, 0, 0, 1))
             bag.string("/diagnostics", stamp)
         rgb = cv2.cvtColor(colour(i), cv2.COLOR_BGR2RGB)
-        # Depth stamped 2 ms after colour; logged before colour on even frames.
-        d_stamp, d_log = stamp + 2_000_000, stamp + (1_000_000 if i % 2 else -1_000_000)
+        # Depth stamped 2 ms after colour, and 0.1 ms more each frame (the depth sensor's clock
+        # running slow); logged before colour on even frames.
+        d_stamp = stamp + round(1e9 * depth_delay(i))
+        d_log = stamp + (1_000_000 if i % 2 else -1_000_000)
         if depth_topic and i != MISSING_DEPTH and i % 2 == 0:
             bag.image(depth_topic, d_stamp, depth(i), "16UC1", log_ns=d_log)
         bag.image(color, stamp, rgb, "rgb8", log_ns=stamp + 500_000, pad=4 * (i == 1))
@@ -482,6 +483,11 @@ def write_rgbd_bag(path: Path, ros: int, *, color="/camera/color/image_raw",
     bag.close()
 
 
+def depth_delay(i: int) -> float:
+    """When write_rgbd_bag's depth frame ``i`` is stamped after its colour frame (s)."""
+    return 0.002 + 1e-4 * i
+
+
 def check_rgbd_frames(frames: list[Frame], with_depth: bool = True) -> None:
     assert [f.index for f in frames] == list(range(N_BAG))
     np.testing.assert_allclose(
@@ -491,8 +497,9 @@ def check_rgbd_frames(frames: list[Frame], with_depth: bool = True) -> None:
         np.testing.assert_array_equal(f.bgr, colour(i))  # rgb8 -> BGR, row padding removed
         if with_depth and i != MISSING_DEPTH:
             np.testing.assert_array_equal(f.depth, depth(i))
+            assert f.depth_delay == pytest.approx(depth_delay(i), abs=1e-9)  # each its own
         else:
-            assert f.depth is None
+            assert f.depth is None and f.depth_delay is None
 
 
 @needs_rosbags
@@ -508,9 +515,9 @@ def test_bag_auto_detects_topics_and_camera(tmp_path, ros):
     assert rec.info_topic == "/camera/color/camera_info"
     assert len(rec) == N_BAG and rec.has_depth
     assert rec.time_origin == pytest.approx(T0_NS / 1e9, abs=1e-6)
-    # the depth stamped 2 ms after its colour frame (write_rgbd_bag): captured that much later
+    # the depth's delays are the frames' own (check_rgbd_frames), not the camera's
     expected = Camera(fx=80.0, fy=81.0, cx=31.7, cy=23.2, width=W, height=H, depth_scale=0.001,
-                      dist=D, depth_delay=0.002)
+                      dist=D)
     assert rec.camera == expected
     with rec:
         check_rgbd_frames(list(rec))
@@ -585,20 +592,10 @@ def test_bag_missing_topics_list_what_is_there(tmp_path):
         open_recording(path)
     one_line(err, "noinfo.bag", "CameraInfo", "/camera/color/image_raw", "--camera")
     rec = open_recording(path, camera=CAMERA)  # a camera file replaces camera_info
-    assert rec.camera == replace(CAMERA, depth_delay=0.002) and rec.info_topic is None
+    assert rec.camera == CAMERA and rec.info_topic is None
     check_rgbd_frames(list(rec))
-    stated = replace(CAMERA, depth_delay=-0.004)  # a delay the camera file states wins
+    stated = replace(CAMERA, depth_delay=-0.004)  # the tracker takes it over the frames' own
     assert open_recording(path, camera=stated).camera == stated
-
-
-def test_the_paired_frames_tell_the_depths_delay():
-    """The median offset of each colour stamp's nearest depth stamp within the tolerance: a
-    depth stream 12 ms behind at one rate, one depth frame dropped, one colour frame alone."""
-    colour = [k * 33_000_000 for k in range(8)]
-    depth = [c + 12_000_000 for c in colour if c != 99_000_000]
-    assert paired_delay(colour, depth, 16_500_000) == pytest.approx(0.012)
-    assert paired_delay(colour, depth, 10_000_000) is None  # nothing within 10 ms
-    assert paired_delay(colour, [], 16_500_000) is None
 
 
 @needs_rosbags

@@ -11,8 +11,8 @@ blob's depth at the wrong pixel.
 Depth comes out as uint16 in the camera's depth units (REP 118: 16UC1 is millimetres, 32FC1 is
 metres); a camera made from camera_info has depth_scale 0.001. Each colour frame is paired with
 the depth frame nearest in header time, if one is within half a colour frame interval
-(``sync_tolerance`` overrides); the first frames' pairs tell how long after its colour frame a
-depth frame was captured (``Camera.depth_delay``, unless the camera given states one).
+(``sync_tolerance`` overrides); each pair's stamps tell how long after its colour frame the
+depth frame was captured (``Frame.depth_delay``; tracking/depth_timing.py).
 Timestamps are header stamps (the bag's receive time where a stamp is zero) in seconds relative
 to the first colour frame; ``time_origin`` is that frame's absolute time (s since the epoch).
 Messages are streamed: a few frames are buffered for pairing, never the recording.
@@ -25,13 +25,12 @@ import re
 import statistics
 import warnings
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import closing
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from wristtrack.camera import MAX_DEPTH_DELAY_S, Camera
+from wristtrack.camera import Camera
 from wristtrack.errors import ConfigError, InputError
 from wristtrack.hand import HandLayout
 from wristtrack.io.base import Frame, Recording, check_depth, reject_options
@@ -207,11 +206,6 @@ class BagRecording(Recording):
             period = statistics.median(diffs) if diffs else DEFAULT_PERIOD_NS
             self.sync_tolerance = sync_tolerance if sync_tolerance is not None else period / 2e9
             self.has_depth = self.depth_topic is not None
-            if self.has_depth and self.camera.depth_delay is None:
-                depth_stamps = self._stamps(reader, self.depth_topic, 2 * len(stamps))
-                delay = paired_delay(stamps, depth_stamps, round(self.sync_tolerance * 1e9))
-                if delay is not None and abs(delay) <= MAX_DEPTH_DELAY_S:
-                    self.camera = replace(self.camera, depth_delay=delay)
         self.time_origin = stamps[0] / 1e9
         self._t0 = stamps[0]
 
@@ -328,19 +322,13 @@ class BagRecording(Recording):
     def _colour_stamps(self, reader: Any) -> list[int]:
         """Stamps of the first few colour frames; the first one is decoded to check its size."""
         where = f"{self.where} topic {self.color_topic}"
-        return self._stamps(reader, self.color_topic, PERIOD_SAMPLE,
-                            lambda m: self.check_size(decode_colour(m, where), where))
-
-    def _stamps(self, reader: Any, topic: str, count: int,
-                first: Callable[[RosMessage], object] | None = None) -> list[int]:
-        """Stamps of the first ``count`` messages on ``topic``, ``first`` called on the first."""
         stamps: list[int] = []
-        with closing(self._messages(reader, [topic])) as messages:
+        with closing(self._messages(reader, [self.color_topic])) as messages:
             for _, m in messages:
-                if first is not None and not stamps:
-                    first(m)
+                if not stamps:
+                    self.check_size(decode_colour(m, where), where)
                 stamps.append(m.stamp)
-                if len(stamps) >= count:
+                if len(stamps) >= PERIOD_SAMPLE:
                     break
         return stamps
 
@@ -402,29 +390,16 @@ class BagRecording(Recording):
         try:
             bgr = decode_colour(c, where)
             self.check_size(bgr, where)
-            depth = None
+            depth = delay = None
             if depths:
                 best = min(depths, key=lambda d: abs(d.stamp - c.stamp))
                 if abs(best.stamp - c.stamp) <= tol:
                     where = f"{self.where} topic {self.depth_topic} (for frame {index})"
                     raw = decode_depth(best, self.camera.depth_scale, where)
-                    depth = check_depth(raw, bgr, where)
+                    depth, delay = check_depth(raw, bgr, where), (best.stamp - c.stamp) / 1e9
         except InputError as e:  # this frame only: the caller notes it and goes on
             return Frame.bad(index, timestamp, str(e))
-        return Frame(index, timestamp, bgr, depth)
-
-
-def paired_delay(colour: list[int], depth: list[int], tolerance: int) -> float | None:
-    """The depth frames' capture after their colour frames (s; Camera.depth_delay), the median
-    over the colour stamps (ns) of the nearest depth stamp's offset where it is within
-    ``tolerance`` ns, as the frames are paired; None where none pairs. Streams at one rate keep
-    the offset over a recording, so the first frames tell it."""
-    offsets = []
-    for c in colour:
-        nearest = min(depth, key=lambda d: abs(d - c), default=None)
-        if nearest is not None and abs(nearest - c) <= tolerance:
-            offsets.append(nearest - c)
-    return statistics.median(offsets) / 1e9 if offsets else None
+        return Frame(index, timestamp, bgr, depth, depth_delay=delay)
 
 
 def _until_damaged(messages: Iterator, failure: list[str]) -> Iterator:

@@ -6,6 +6,8 @@ folder named by ``OPENNI2_REDIST64``). Depth is registered to colour by the devi
 (``IMAGE_REGISTRATION_DEPTH_TO_COLOR``) with depth/colour frame sync on. OpenNI2 reports no
 calibration, only the fields of view: without ``--camera`` the pinhole is derived from them
 (no distortion; an Xtion's is ~2 px at the corners, so calibrate for best accuracy).
+The device stamps both streams on its own clock: a pair's two stamps tell how long after its
+colour frame the depth frame was captured (``Frame.depth_delay``).
 """
 
 from __future__ import annotations
@@ -177,13 +179,13 @@ class OpenNIRecording(Recording):
                 else:
                     colors.append(self._read_color(index + len(colors)))
                 ready = self._ni.wait_for_any_stream(self._streams[::-1], 0)
-            for bgr, t, raw in _pair(colors, depths, tolerance, self._depth is not None):
+            for bgr, t, raw, delay in _pair(colors, depths, tolerance, self._depth is not None):
                 t0 = t if t0 is None else t0
                 if raw is not None and raw.shape != bgr.shape[:2]:
                     raise InputError(f"{self.source}: depth is {raw.shape[1]}x{raw.shape[0]} "
                                      f"but colour is {bgr.shape[1]}x{bgr.shape[0]}; set both "
                                      "streams to one resolution")
-                yield Frame(index, t - t0, bgr, raw)
+                yield Frame(index, t - t0, bgr, raw, depth_delay=delay)
                 index += 1
 
     def _read_color(self, index: int) -> tuple[np.ndarray, float]:
@@ -220,16 +222,18 @@ class OpenNIRecording(Recording):
 
 
 def _pair(colors: deque, depths: deque, tolerance: float, has_depth: bool) -> list[tuple]:
-    """(bgr, t, depth or None) for the waiting colour frames that can be settled now."""
+    """(bgr, t, depth, its stamp after the colour's; or None, None) for the waiting colour
+    frames that can be settled now."""
     out = []
     while colors:
         bgr, t = colors[0]
         while depths and depths[0][1] < t - tolerance:
             depths.popleft()  # older than any colour frame still to come
         if depths and abs(depths[0][1] - t) <= tolerance:
-            out.append((bgr, t, depths.popleft()[0]))
+            raw, t_depth = depths.popleft()
+            out.append((bgr, t, raw, t_depth - t))
         elif not has_depth or depths or len(colors) > 4:
-            out.append((bgr, t, None))  # its depth is past, or too long in coming
+            out.append((bgr, t, None, None))  # its depth is past, or too long in coming
         else:
             break  # its depth may still arrive
         colors.popleft()

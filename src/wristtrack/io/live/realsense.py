@@ -77,12 +77,23 @@ def _already_registered(depth: Any, color: Any) -> bool:
         np.allclose(ext.translation, 0.0, atol=1e-9)
 
 
+def _capture_stamps(color: Any, depth: Any, rs: Any) -> bool:
+    """Whether both frames are stamped by the device's clock (hardware or global time), so
+    their difference is how long after the colour the depth was captured. Without the frame
+    metadata (a Linux kernel the SDK has not patched) they are the host's arrival times
+    (system time): a USB transfer's delay, not the sensors'."""
+    host = rs.timestamp_domain.system_time
+    return host not in (color.get_frame_timestamp_domain(), depth.get_frame_timestamp_domain())
+
+
 class RealSenseRecording(Recording):
     """A RealSense device (``serial`` or the first one found) or an SDK recording (``file``).
 
     A device streams ``width`` x ``height`` colour (BGR8) and depth (Z16) at ``fps``;
-    timestamps are the SDK's frame timestamps in seconds from the first frame. A colour frame
-    whose depth frame is not of the same moment (``pairing_tolerance``) comes without depth. A
+    timestamps are the SDK's frame timestamps in seconds from the first frame, and the depth
+    stamp's offset from the colour's is the frame's ``depth_delay`` (where the device stamps
+    both). A colour frame whose depth frame is not of the same moment (``pairing_tolerance``)
+    comes without depth. A
     recording plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
     ``camera`` overrides the intrinsics read from the device.
     """
@@ -209,11 +220,14 @@ class RealSenseRecording(Recording):
                 continue
             last_number = number
             t = color.get_timestamp() / 1000.0  # ms -> s
-            if depth and abs(depth.get_timestamp() / 1000.0 - t) > self._tolerance:
+            delay = depth.get_timestamp() / 1000.0 - t if depth else None
+            if depth and abs(delay) > self._tolerance:
                 # The SDK's syncer fills a lost depth frame with the last one it had (a dropped
                 # USB transfer, a late frame under load): that depth shows another moment.
                 # (An aligned depth frame keeps the depth sensor's timestamp: test_live_sources.)
-                depth = None
+                depth = delay = None
+            elif depth and not _capture_stamps(color, depth, self._rs):
+                delay = None
             t0 = t if t0 is None else t0
             if index < start:  # a resumed recording is read from its start, as it was played
                 index += 1
@@ -223,7 +237,7 @@ class RealSenseRecording(Recording):
             raw = np.array(np.asanyarray(depth.get_data()), np.uint16, copy=True) if depth else None
             where = f"{self.source} frame {index}"
             self.check_size(bgr, where)
-            yield Frame(index, t - t0, bgr, raw)
+            yield Frame(index, t - t0, bgr, raw, depth_delay=delay)
             index += 1
 
     def _to_bgr(self, color: Any) -> np.ndarray:

@@ -122,7 +122,7 @@ class CaptureThread(threading.Thread):
                     break
                 self.captured += 1
                 if self.recorder is not None and frame.ok:
-                    self.recorder.put(frame.timestamp, frame.bgr, frame.depth)
+                    self.recorder.put(frame.timestamp, frame.bgr, frame.depth, frame.depth_delay)
                 self.slot.put(Captured(frame, arrived))
         except WristtrackError as exc:
             error = str(exc)
@@ -307,7 +307,7 @@ def track_live(
                     continue
                 if came_without_depth(frame, source.has_depth):
                     log.without_depth.append(frame.index)
-                det = detector.detect(frame.bgr, frame.depth, frame.timestamp)
+                det = detector.detect(frame.bgr, frame.depth, frame.timestamp, frame.depth_delay)
                 try:
                     result = tracker.step(det)
                 except InputError as exc:  # e.g. a timestamp going backwards: skip the frame
@@ -359,6 +359,7 @@ def track_live(
         skipped_frames=skipped,
         frames_without_depth=log.without_depth,
         warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
+        depth_timing=tracker.depth_timing.to_dict(),  # from the camera's stamps, where it has them
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
         hand_layout_surveyed=surveyed.to_dict() if surveyed is not None else None,
@@ -386,4 +387,4 @@ def _record_notes(recorder: LiveRecorder | None) -> dict[str, Any] | None:
     if recorder is None:
         return None
     return {"folder": str(recorder.folder), "frames": recorder.written, "lost": recorder.lost,
-            "error": recorder.error}
+            "error": recorder.error, "depth_delay_s": recorder.depth_delay}
