@@ -37,13 +37,13 @@ CHECKPOINT_FILE = ".checkpoint.pkl"
 CHECKPOINT_FRAMES = 300  # default: a checkpoint at least every this many frames ...
 CHECKPOINT_SECONDS = 30.0  # ... and at least this often (s of wall time)
 _FORMAT = "wristtrack-checkpoint"
-_VERSION = 12  # 2: the skin's shape learned over the still start; 3: its noise; 4: the frame
+_VERSION = 13  # 2: the skin's shape learned over the still start; 3: its noise; 4: the frame
 # rate; 5: the frame rate taken from the correlation's windows; 6: suspect blobs (the
 # observation keeps the model's pixel sigma); 7: the blob noise from each frame's own fit;
 # 8: the observation keeps the layout's mean squared radius, the still start its last frame's
 # time; 9: the run keeps the frames that came without depth; 10: a first pass keeps its survey
 # of the hand layout; 11: the detector keeps the blobs' size it learned; 12: the blobs' spread
-# keeps the fastest frames it was learned from
+# keeps the fastest frames it was learned from; 13: the tracker keeps each frame's depth delay
 _SAMPLE = 1 << 20  # bytes hashed at each end of a video or bag file for its fingerprint
 _FINGERPRINT_NAMES = {
     "software": "software version",

@@ -279,7 +279,7 @@ def _finish(
         measurement_noise=tracker.learned_noise.describe(config.measurement),
         depth_registration=tracker.depth_registration,  # --follow-offset's estimate, else None
         # each depth frame's capture after its colour frame (tracking/depth_timing.py)
-        depth_timing=tracker.depth_timing.to_dict() if hasattr(tracker, "depth_timing") else None,
+        depth_timing=tracker.depth_timing.to_dict(),
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),

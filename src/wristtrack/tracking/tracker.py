@@ -143,8 +143,7 @@ class Tracker:
             )
         self._frame += 1
         self._last_timestamp = det.timestamp
-        timing = self.__dict__.setdefault("depth_timing", DepthTiming(self.camera.depth_delay))
-        delay = timing.delay(det)  # (setdefault: checkpoints from before it)
+        delay = self.depth_timing.delay(det)  # this frame's depth, read at its own delay
         for obs in self._obs.values():
             obs.read_depth_at(delay)
         track = self._track
