@@ -93,14 +93,17 @@ def _rs():
 
 
 def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, lost_depth=(),
-                              baseline=0.0, depth_lag=lambda i: 0.0, domain="hardware_clock"):
+                              baseline=0.0, depth_lag=lambda i: 0.0, domain="hardware_clock",
+                              exposure=None):
     """Record the first ``n`` frames of a recording folder through the SDK: a software device
     with a colour and a depth sensor (the folder's intrinsics, identity extrinsics, as
     registered depth is, or the depth sensor ``baseline`` metres beside the colour one, so
     the reader aligns them), recorded by the SDK's own recorder; the depth frames
     ``lost_depth`` never reach it (as a USB transfer a device drops). Depth frame i is stamped
-    ``depth_lag(i)`` s after its colour frame, both in the timestamp ``domain``. Returns the
-    folder's camera."""
+    ``depth_lag(i)`` s after its colour frame, both in the timestamp ``domain``; with
+    ``exposure`` (colour, depth; s) the frames also carry the middle of their exposure
+    (SENSOR_TIMESTAMP metadata, us), which ends as their stamp's transmission starts. Returns
+    the folder's camera."""
     rs = _rs()
     rec = FolderRecording(folder)
     cam = rec.camera
@@ -147,6 +150,9 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
             sw.domain = getattr(rs.timestamp_domain, domain)
             if bpp == 2:
                 sw.depth_units = scale
+            if exposure is not None:
+                middle = frame.timestamp + lag - exposure[bpp == 2] / 2
+                sensor.set_metadata(rs.frame_metadata_value.sensor_timestamp, round(middle * 1e6))
             sensor.on_video_frame(sw)
     for sensor in (depth_sensor, color_sensor):
         sensor.stop()
@@ -332,18 +338,27 @@ def test_track_reads_a_realsense_recording_offline_frame_by_frame(reach, realsen
         np.testing.assert_allclose(bag[col], off[col], atol=1e-4)
 
 
-def test_realsense_depth_stamps_tell_each_frames_depth_delay(short, tmp_path):
+@pytest.mark.parametrize("baseline", [0.0, 0.025])
+def test_realsense_depth_stamps_tell_each_frames_depth_delay(short, tmp_path, baseline):
     """The depth sensor's stamps 6 ms after the colour's, slipping 0.5 ms a frame (two clocks):
-    each frame carries its own delay. Stamps of the host's arrival (system time, as without
-    the SDK's kernel patches) say nothing of the capture: no delay."""
+    each frame carries its own delay. Where the frames report the middle of their exposure
+    (the colour exposed 30 ms, the depth 8 ms, each stamped as its transfer starts) that is
+    the moment captured: the colour's middle 15 ms before its stamp, the depth's 4 ms, so the
+    depth came 11 ms later after it than the stamps say. Stamps of the host's
+    arrival (system time, as without the SDK's kernel patches) say nothing of the capture: no
+    delay. Registered depth, or depth the reader aligns (rs.align keeps its metadata)."""
     lag = lambda i: 0.006 + 0.0005 * i  # noqa: E731
-    write_realsense_recording(tmp_path / "lag.db3", short, n=6, depth_lag=lag)
-    with open_recording(tmp_path / "lag.db3") as rec:
-        frames = list(rec.frames())
-    assert [f.index for f in frames] == list(range(6)) and all(f.depth is not None
-                                                              for f in frames)
-    np.testing.assert_allclose([f.depth_delay for f in frames], [lag(i) for i in range(6)],
-                               atol=1e-6)  # stamps pass through the SDK as float ms
+    for exposure, earlier in ((None, 0.0), ((0.030, 0.008), 0.011)):
+        path = tmp_path / f"lag{earlier}.db3"
+        write_realsense_recording(path, short, n=6, depth_lag=lag, exposure=exposure,
+                                  baseline=baseline)
+        with open_recording(path) as rec:
+            frames = list(rec.frames())
+        assert [f.index for f in frames] == list(range(6))
+        assert all(f.depth is not None for f in frames)
+        np.testing.assert_allclose([f.depth_delay for f in frames],
+                                   [lag(i) + earlier for i in range(6)],
+                                   atol=1e-6)  # stamps pass through the SDK as float ms
     write_realsense_recording(tmp_path / "host.db3", short, n=4, depth_lag=lag,
                               domain="system_time")
     with open_recording(tmp_path / "host.db3") as rec:

@@ -77,22 +77,35 @@ def _already_registered(depth: Any, color: Any) -> bool:
         np.allclose(ext.translation, 0.0, atol=1e-9)
 
 
-def _capture_stamps(color: Any, depth: Any, rs: Any) -> bool:
-    """Whether both frames are stamped by the device's clock (hardware or global time), so
-    their difference is how long after the colour the depth was captured. Without the frame
-    metadata (a Linux kernel the SDK has not patched) they are the host's arrival times
-    (system time): a USB transfer's delay, not the sensors'."""
+def capture_offset(color: Any, depth: Any, rs: Any) -> float | None:
+    """How long after the colour frame's capture its depth frame's was (s), or None: not known.
+
+    The moment a sensor captures is the middle of its exposure, which the device reports as
+    SENSOR_TIMESTAMP metadata (us). ``get_timestamp`` is the start of the frame's USB transfer,
+    which follows the readout: with the colour exposed 30 ms and the depth 8 ms indoors, the
+    colour's middle is 11 ms further before its stamp, and those stamps say the depth came
+    11 ms sooner after the colour than it did. Both come from the device's clock, where it
+    sends them; without the metadata (a Linux kernel the SDK has not patched) the stamps are
+    the host's arrival times (system time), a USB transfer's delay, not the sensors'.
+    """
+    middle = rs.frame_metadata_value.sensor_timestamp
+    if color.supports_frame_metadata(middle) and depth.supports_frame_metadata(middle):
+        offset = (depth.get_frame_metadata(middle) - color.get_frame_metadata(middle)) / 1e6
+        if abs(offset) < 1.0:  # (the firmware's 32-bit microsecond counter wraps hourly)
+            return offset
     host = rs.timestamp_domain.system_time
-    return host not in (color.get_frame_timestamp_domain(), depth.get_frame_timestamp_domain())
+    if host in (color.get_frame_timestamp_domain(), depth.get_frame_timestamp_domain()):
+        return None
+    return (depth.get_timestamp() - color.get_timestamp()) / 1e3
 
 
 class RealSenseRecording(Recording):
     """A RealSense device (``serial`` or the first one found) or an SDK recording (``file``).
 
     A device streams ``width`` x ``height`` colour (BGR8) and depth (Z16) at ``fps``;
-    timestamps are the SDK's frame timestamps in seconds from the first frame, and the depth
-    stamp's offset from the colour's is the frame's ``depth_delay`` (where the device stamps
-    both). A colour frame whose depth frame is not of the same moment (``pairing_tolerance``)
+    timestamps are the SDK's frame timestamps in seconds from the first frame; how long after
+    the colour the depth was captured is the frame's ``depth_delay`` (:func:`capture_offset`).
+    A colour frame whose depth frame is not of the same moment (``pairing_tolerance``)
     comes without depth. A
     recording plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
     ``camera`` overrides the intrinsics read from the device.
@@ -220,14 +233,13 @@ class RealSenseRecording(Recording):
                 continue
             last_number = number
             t = color.get_timestamp() / 1000.0  # ms -> s
-            delay = depth.get_timestamp() / 1000.0 - t if depth else None
-            if depth and abs(delay) > self._tolerance:
+            if depth and abs(depth.get_timestamp() / 1000.0 - t) > self._tolerance:
                 # The SDK's syncer fills a lost depth frame with the last one it had (a dropped
                 # USB transfer, a late frame under load): that depth shows another moment.
-                # (An aligned depth frame keeps the depth sensor's timestamp: test_live_sources.)
-                depth = delay = None
-            elif depth and not _capture_stamps(color, depth, self._rs):
-                delay = None
+                # (An aligned depth frame keeps the depth sensor's timestamp and metadata:
+                # test_live_sources.)
+                depth = None
+            delay = capture_offset(color, depth, self._rs) if depth else None
             t0 = t if t0 is None else t0
             if index < start:  # a resumed recording is read from its start, as it was played
                 index += 1
