@@ -101,9 +101,9 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
     the reader aligns them), recorded by the SDK's own recorder; the depth frames
     ``lost_depth`` never reach it (as a USB transfer a device drops). Depth frame i is stamped
     ``depth_lag(i)`` s after its colour frame, both in the timestamp ``domain``; with
-    ``exposure`` (colour, depth; s) the frames also carry the middle of their exposure
-    (SENSOR_TIMESTAMP metadata, us), which ends as their stamp's transmission starts. Returns
-    the folder's camera."""
+    ``exposure(i)`` (colour, depth; s) the frames also carry the middle of their exposure
+    (SENSOR_TIMESTAMP metadata, us), which ends as their transfer starts (FRAME_TIMESTAMP, the
+    stamp). Returns the folder's camera."""
     rs = _rs()
     rec = FolderRecording(folder)
     cam = rec.camera
@@ -151,8 +151,10 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
             if bpp == 2:
                 sw.depth_units = scale
             if exposure is not None:
-                middle = frame.timestamp + lag - exposure[bpp == 2] / 2
+                sent = frame.timestamp + lag
+                middle = sent - exposure(i)[bpp == 2] / 2
                 sensor.set_metadata(rs.frame_metadata_value.sensor_timestamp, round(middle * 1e6))
+                sensor.set_metadata(rs.frame_metadata_value.frame_timestamp, round(sent * 1e6))
             sensor.on_video_frame(sw)
     for sensor in (depth_sensor, color_sensor):
         sensor.stop()
@@ -344,21 +346,31 @@ def test_realsense_depth_stamps_tell_each_frames_depth_delay(short, tmp_path, ba
     each frame carries its own delay. Where the frames report the middle of their exposure
     (the colour exposed 30 ms, the depth 8 ms, each stamped as its transfer starts) that is
     the moment captured: the colour's middle 15 ms before its stamp, the depth's 4 ms, so the
-    depth came 11 ms later after it than the stamps say. Stamps of the host's
+    depth came 11 ms later after it than the stamps say; and under the colour's auto-exposure
+    (10 ms, growing 4 ms a frame) each frame's time is its own middle. Stamps of the host's
     arrival (system time, as without the SDK's kernel patches) say nothing of the capture: no
     delay. Registered depth, or depth the reader aligns (rs.align keeps its metadata)."""
     lag = lambda i: 0.006 + 0.0005 * i  # noqa: E731
-    for exposure, earlier in ((None, 0.0), ((0.030, 0.008), 0.011)):
-        path = tmp_path / f"lag{earlier}.db3"
+    stamps = [f.timestamp for _, f in zip(range(6), FolderRecording(short).frames(),
+                                         strict=False)]
+    auto = lambda i: (0.010 + 0.004 * i, 0.008)  # noqa: E731  (the colour's auto-exposure)
+    for name, exposure, later, lead in (
+        ("stamps", None, lambda i: 0.0, lambda i: 0.0),
+        ("fixed", lambda i: (0.030, 0.008), lambda i: 0.011, lambda i: 0.0),
+        ("auto", auto, lambda i: auto(i)[0] / 2 - 0.004, lambda i: 0.002 * i),
+    ):
+        path = tmp_path / f"{name}.db3"
         write_realsense_recording(path, short, n=6, depth_lag=lag, exposure=exposure,
                                   baseline=baseline)
         with open_recording(path) as rec:
             frames = list(rec.frames())
         assert [f.index for f in frames] == list(range(6))
         assert all(f.depth is not None for f in frames)
-        np.testing.assert_allclose([f.depth_delay for f in frames],
-                                   [lag(i) + earlier for i in range(6)],
-                                   atol=1e-6)  # stamps pass through the SDK as float ms
+        np.testing.assert_allclose([f.depth_delay for f in frames],  # stamps pass through
+                                   [lag(i) + later(i) for i in range(6)], atol=1e-6)  # as ms
+        # a frame's time is its colour's middle of exposure (from the first frame's)
+        np.testing.assert_allclose([f.timestamp for f in frames],
+                                   [stamps[i] - lead(i) for i in range(6)], atol=1e-6)
     write_realsense_recording(tmp_path / "host.db3", short, n=4, depth_lag=lag,
                               domain="system_time")
     with open_recording(tmp_path / "host.db3") as rec:
