@@ -188,6 +188,22 @@ def test_depth_delay_round_trips_and_unknown_is_left_out(tmp_path, delay):
     assert Camera.load(path).depth_delay is None
 
 
+def test_readout_round_trips_and_gives_each_rows_time(tmp_path):
+    """camera.json's optional readout_s (a rolling shutter's top row to bottom one): the middle
+    row at the frame's time, the top and bottom rows half the readout before and after (by
+    hand: rows 0 and 479 of 480 are 0.5 and 479.5 / 480 of the way down); absent, a global
+    shutter's rows all at once."""
+    cam = dataclasses.replace(Camera.default(), readout=0.024)
+    path = tmp_path / "camera.json"
+    cam.save(path)
+    assert json.loads(path.read_text())["readout_s"] == 0.024 and Camera.load(path) == cam
+    np.testing.assert_allclose(cam.row_time(np.array([0.0, 239.5, 479.0])),
+                               [-0.012 + 0.024 / 960, 0.0, 0.012 - 0.024 / 960], atol=1e-15)
+    assert Camera.default().row_time(479.0) == 0.0
+    Camera.default().save(path)
+    assert "readout_s" not in json.loads(path.read_text()) and Camera.load(path).readout is None
+
+
 def test_load_accepts_integral_floats_and_extra_fields(tmp_path):
     path = write_json(tmp_path, {**GOOD, "width": 640.0, "model": "xtion", "dist": None})
     cam = Camera.load(path)
@@ -224,6 +240,9 @@ def test_missing_field(tmp_path, field):
         ("depth_delay_s", 8),  # milliseconds given for seconds
         ("depth_delay_s", "0.008"),
         ("depth_delay_s", float("inf")),
+        ("readout_s", 25),  # milliseconds given for seconds
+        ("readout_s", -0.01),
+        ("readout_s", "0.025"),
     ],
 )
 def test_bad_field_value(tmp_path, field, value):

@@ -22,6 +22,9 @@ DIST_LENGTHS = (4, 5, 8)
 # A depth frame paired with a colour frame by time stamp is at most half a frame interval away
 # from it (10 fps is the slowest rate a depth camera streams at): longer is a unit mistake.
 MAX_DEPTH_DELAY_S = 0.05
+# A rolling shutter reads its rows within a frame interval (10 fps at the slowest): longer is a
+# unit mistake.
+MAX_READOUT_S = 0.1
 # Coarsest plausible depth unit (1 cm): 16-bit depth then reaches 655 m. Larger values are
 # inverted units (1000 for millimetres) and would make every depth reading absurd.
 MAX_DEPTH_SCALE = 0.01
@@ -79,6 +82,10 @@ class Camera:
     depth frame nearest in time, up to half a frame interval away (io/rosbag.py); over a
     recording the pair keeps its phase. 0 for depth captured with the colour (synchronised
     sensors); None where it is not known (the tracker then reads the depth as simultaneous).
+    ``readout`` (s, camera.json ``readout_s``, optional) is how long a rolling-shutter colour
+    sensor takes to read its rows, top to bottom: each row is exposed that much later than the
+    one above it in proportion, the middle row at the frame's time. 0 or None: a global
+    shutter (every row at once).
     """
 
     fx: float
@@ -90,6 +97,7 @@ class Camera:
     depth_scale: float = 0.001
     dist: tuple[float, ...] | None = None
     depth_delay: float | None = None
+    readout: float | None = None
 
     def __post_init__(self) -> None:
         # Validate code-built cameras too, so a bad camera fails here and not deep in a filter.
@@ -113,6 +121,15 @@ class Camera:
                 "either way); it is seconds from the colour frame to its depth frame, e.g. 0.008"
             )
         object.__setattr__(self, "depth_delay", delay)
+        readout = d.get("readout")
+        if readout is not None:
+            readout = _check_number(readout, "readout_s", where, positive=False)
+            if not 0.0 <= readout <= MAX_READOUT_S:
+                raise ConfigError(
+                    f"{where}: field 'readout_s' is {readout:g} s (0 to {MAX_READOUT_S:g}); it is "
+                    "the seconds a rolling shutter takes from the top row to the bottom, e.g. 0.025"
+                )
+        object.__setattr__(self, "readout", readout)
         if not (0.0 <= self.cx <= self.width and 0.0 <= self.cy <= self.height):
             raise ConfigError(
                 f"{where}: principal point ('cx', 'cy') = ({self.cx:g}, {self.cy:g}) lies outside "
@@ -252,6 +269,11 @@ class Camera:
         u, v = uv[..., 0], uv[..., 1]
         return (u >= -0.5) & (u < self.width - 0.5) & (v >= -0.5) & (v < self.height - 0.5)
 
+    def row_time(self, v: np.ndarray | float) -> np.ndarray | float:
+        """When image row coordinate ``v`` was exposed, in s after the frame's time (its middle
+        row's): ``readout`` ((v + 1/2) / height - 1/2), 0 for a global shutter."""
+        return ((np.asarray(v, dtype=float) + 0.5) / self.height - 0.5) * (self.readout or 0.0)
+
     # --------------------------------------------------------------------------------- files
 
     def to_dict(self) -> dict[str, Any]:
@@ -269,6 +291,8 @@ class Camera:
             d["dist"] = list(self.dist)
         if self.depth_delay is not None:
             d["depth_delay_s"] = self.depth_delay
+        if self.readout is not None:
+            d["readout_s"] = self.readout
         return d
 
     @classmethod
@@ -284,12 +308,14 @@ class Camera:
         if missing:
             raise ConfigError(
                 f"{where}: missing field {', '.join(repr(f) for f in missing)}; camera.json needs "
-                f"{', '.join(REQUIRED_FIELDS)} (and optionally dist, depth_delay_s)"
+                f"{', '.join(REQUIRED_FIELDS)} (and optionally dist, depth_delay_s, readout_s)"
             )
         # Validate with the file name in the message, then build (which re-checks cheaply).
         cam = object.__new__(cls)
-        cam._set_validated({**d, "depth_delay": d.get("depth_delay_s")}, where)
-        return cls(**{f: getattr(cam, f) for f in (*REQUIRED_FIELDS, "dist", "depth_delay")})
+        cam._set_validated({**d, "depth_delay": d.get("depth_delay_s"),
+                            "readout": d.get("readout_s")}, where)
+        return cls(**{f: getattr(cam, f)
+                      for f in (*REQUIRED_FIELDS, "dist", "depth_delay", "readout")})
 
     @classmethod
     def load(cls, path: str | Path) -> Camera:

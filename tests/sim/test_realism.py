@@ -11,6 +11,7 @@ import pytest
 from wristtrack.camera import Camera
 from wristtrack.cli import main
 from wristtrack.depth_noise import depth_sigma_nguyen, oblique_sigma
+from wristtrack.detect.detector import MarkerDetector
 from wristtrack.errors import ConfigError
 from wristtrack.hand import MARKER_NAMES, HandLayout
 from wristtrack.io.poses import read_poses
@@ -524,7 +525,9 @@ def test_preset_real_through_the_cli_and_bad_effects(tmp_path, capsys):
     assert "structured_light" in capsys.readouterr().out
     assert Camera.load(out / "camera.json").dist == realism.XTION_DIST
     assert np.ptp(HandLayout.load(out / "hand.json").points[:, 2]) > 0.004
-    assert set(realism.PRESET_REAL) == set(realism.EFFECTS) - {"h264", "left_hand"}
+    # one compression, the side apart; the rolling shutter until the benchmarks measure it
+    assert set(realism.PRESET_REAL) == set(realism.EFFECTS) - {"h264", "left_hand",
+                                                                "rolling_shutter"}
     with pytest.raises(ConfigError, match="unknown simulator effect.*sparkle"):
         make_scene("deviation", effects=["sparkle"])
     with pytest.raises(ConfigError, match="hand side"):
@@ -580,3 +583,44 @@ def test_depth_lag_captures_the_depth_a_fixed_delay_after_the_colour():
     delays = [realism.depth_delay(seed, 30.0) for seed in range(200)]
     assert max(np.abs(delays)) <= 1 / 60 and np.std(delays) == pytest.approx(1 / 60 / 3**0.5,
                                                                               rel=0.15)
+
+
+def test_rolling_shutter_exposes_each_row_at_its_own_time():
+    """Each row is exposed over the scene's exposure centred on its own time, the bottom row a
+    readout after the top one: the detector finds each marker where it is when the row it is
+    on is read (the time its own row gives, found by iterating the motion), to 0.1 px, where
+    the frame's moment is up to several pixels off in the fast reach. The readout is drawn per
+    recording in half to one frame interval and written into camera.json; the depth (a global
+    shutter) and every row of a still hand are as without it."""
+    rolled = make_scene("reach", 8, n_frames=60, effects=["rolling_shutter"])
+    plain = make_scene("reach", 8, n_frames=60)
+    cam = rolled.camera
+    assert cam.readout == realism.readout(8, rolled.fps) and 1 / 60 <= cam.readout <= 1 / 30
+    renderer, detector = Renderer(rolled, 8), MarkerDetector(cam)
+    points = rolled.layout.points
+
+    def markers(t):
+        R, p = renderer.pose(t)
+        return cam.project(points @ R.T + p)
+
+    off_frame, off_rows = [], []
+    for t in rolled.times[32:44]:  # the reach's fastest third
+        frame = renderer.frame(float(t))
+        found = detector.detect(frame.bgr, frame.depth, float(t)).uv
+        when = np.full(6, float(t))
+        for _ in range(5):  # each marker's row is read when it is on it
+            read = np.array([markers(s)[j] for j, s in enumerate(when)])
+            when = float(t) + cam.row_time(read[:, 1])
+        nearest = np.linalg.norm(found[:, None] - read[None], axis=2).argmin(axis=0)
+        off_rows.append(np.linalg.norm(found[nearest] - read, axis=1))
+        off_frame.append(np.linalg.norm(found[nearest] - markers(float(t)), axis=1))
+    assert np.max(off_frame) > 2.0 and np.max(off_rows) < 0.1 * np.max(off_frame)
+    assert np.mean(off_rows) < 0.1
+    # the depth is the global shutter's; a still hand (the start) renders as without it
+    ours, theirs = Renderer(rolled, 8).frame(2.0), Renderer(plain, 8).frame(2.0)
+    np.testing.assert_array_equal(ours.depth, theirs.depth)
+    still_r, still_p = Renderer(rolled, 8).frame(0.0), Renderer(plain, 8).frame(0.0)
+    assert np.abs(still_r.bgr.astype(int) - still_p.bgr).max() <= 1
+    readouts = [realism.readout(seed, 30.0) for seed in range(200)]
+    assert 1 / 60 <= min(readouts) and max(readouts) <= 1 / 30
+    assert np.std(readouts) == pytest.approx(1 / 60 / 12**0.5, rel=0.15)

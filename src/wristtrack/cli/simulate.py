@@ -95,6 +95,8 @@ _SIM_EFFECT_HELP = {
     "holes, invalid border, 1-2 px colour-depth misregistration",
     "depth_lag": "depth captured up to half a frame before or after the colour (streams on "
     "their own clocks), the delay in camera.json",
+    "rolling_shutter": "a rolling-shutter colour sensor reading its rows over half to one frame "
+    "interval, the readout in camera.json",
 }
 
 

@@ -280,6 +280,7 @@ class Renderer:
         extra = [] if lagged is None else [lagged.layer]
         region = x0, y0, x1, y1 = self.region([mo.layer for mo in moments] + extra)
         acc = np.zeros((y1 - y0, x1 - x0, 3), np.float32)
+        rows = self._row_weights(times, t, y0, y1) if cam.readout else None
         mid = len(times) // 2
         z_mid, light = None, None
         for i in [mid] + [j for j in range(len(times)) if j != mid]:
@@ -296,10 +297,14 @@ class Renderer:
                 li = light if i == mid else light_i
                 cv2.multiply(colour, cv2.merge((li, li, li)), dst=colour)
             c, v = self._markers(region, moments[i], colour, ids, zbuf)
-            acc += colour
+            if rows is None:
+                acc += colour
+            else:  # each row its share of the sub-frame (its own exposure)
+                acc += colour * rows[i][:, None, None]
             if i == mid:
                 z_mid, cents, vis = zbuf, c, v
-        acc = cv2.multiply(acc, self.vignette[y0:y1, x0:x1], scale=1.0 / len(times))
+        acc = cv2.multiply(acc, self.vignette[y0:y1, x0:x1],
+                           scale=1.0 / len(times) if rows is None else 1.0)
         img = bg.blurred.copy()
         blurred = cv2.GaussianBlur(acc, (0, 0), 0.6)
         m = 3  # the region's outer pixels keep the background's own blur
@@ -315,10 +320,30 @@ class Renderer:
         depth = self.depth.capture(z_mid, region) if scene.depth else None
         return RenderedFrame(float(t), bgr, depth, cents, vis)
 
-    def _subframe_times(self, t: float) -> np.ndarray:
-        """Sub-frame times over the exposure: enough that markers move < ~1 px between (the
-        lens blur smooths the steps)."""
+    def _row_weights(self, times: np.ndarray, t: float, y0: int, y1: int) -> np.ndarray:
+        """(sub-frames, rows y0..y1) float32: each row's share of each sub-frame under a rolling
+        shutter. Row y is exposed over scene.exposure centred on t + Camera.row_time(y); each
+        sub-frame stands for the time halfway to its neighbours (the two ends half that:
+        trapezoids), and a row takes each one's overlap with its exposure (with none, the
+        sub-frame nearest its moment). Each row's shares sum to 1."""
+        centre = t + self.cam.row_time(np.arange(y0, y1))
         e = self.scene.exposure
+        if len(times) == 1:
+            return np.ones((1, y1 - y0), np.float32)
+        step = times[1] - times[0]
+        if e <= 0:
+            nearest = np.clip(np.rint((centre - times[0]) / step), 0, len(times) - 1)
+            return (np.arange(len(times))[:, None] == nearest[None]).astype(np.float32)
+        lo = np.maximum(times[:, None] - step / 2, centre[None] - e / 2)
+        hi = np.minimum(times[:, None] + step / 2, centre[None] + e / 2)
+        share = np.clip(hi - lo, 0.0, None)
+        return (share / share.sum(axis=0)).astype(np.float32)
+
+    def _subframe_times(self, t: float) -> np.ndarray:
+        """Sub-frame times over the exposure (of every row: a rolling shutter's span its
+        readout more): enough that markers move < ~1 px between (the lens blur smooths the
+        steps)."""
+        e = self.scene.exposure + (self.cam.readout or 0.0)
         if e <= 0:
             return np.array([t])
         pts = []
@@ -328,5 +353,12 @@ class Renderer:
         move = float(np.max(np.linalg.norm(pts[1] - pts[0], axis=1)))
         # A long shutter's streaks need more sub-frames than the plain scenarios ever did.
         k = int(np.clip(np.ceil(move), 1, 31 if "shutter" in self.scene.effects else 15))
+        if self.cam.readout:
+            # Each row's own exposure needs sub-frames of its own, three or more (without blur,
+            # one within 0.1 px of its moment): with two in a span of three a row blends two
+            # poses, and its blob centre strays 0.1 px from where the row saw the marker.
+            exposure = self.scene.exposure
+            k = max(k, int(np.ceil(3 * e / exposure if exposure > 0 else 10 * move)) + 1)
+            k = min(k, 61)
         k += 1 - k % 2  # odd: the middle sub-frame is at t exactly (depth, truth)
         return t + e * (np.linspace(-0.5, 0.5, k) if k > 1 else np.zeros(1))

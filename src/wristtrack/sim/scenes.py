@@ -242,7 +242,8 @@ def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
     """``scene`` with realism ``effects`` switched on: those that change the hand or the camera
     (left hand, arched layout, lens distortion, long shutter) are applied to them here, the
     others when rendering. ``keep_exposure``: an exposure chosen explicitly wins over the
-    ``shutter`` effect's. ``seed`` draws the depth stream's delay (``depth_lag``)."""
+    ``shutter`` effect's. ``seed`` draws the depth stream's delay (``depth_lag``) and the
+    rolling shutter's readout (``rolling_shutter``)."""
     names = set(realism.check_effects(effects))
     if hand_side not in ("right", "left"):
         raise ConfigError(f"hand side must be 'right' or 'left', got {hand_side!r}")
@@ -261,6 +262,8 @@ def with_effects(scene: Scene, effects: Any, hand_side: str = "right",
         camera = realism.distorted(camera)
     if "depth_lag" in names and scene.depth:
         camera = replace(camera, depth_delay=realism.depth_delay(seed, scene.fps))
+    if "rolling_shutter" in names:
+        camera = replace(camera, readout=realism.readout(seed, scene.fps))
     if "shutter" in names and not keep_exposure:
         exposure = realism.LONG_SHUTTER_S
     return replace(scene, layout=layout, camera=camera, exposure=exposure,
