@@ -219,13 +219,16 @@ def _assert_same_results(first, second) -> None:
             assert a.nis == pytest.approx(b.nis, rel=REL, nan_ok=True)
 
 
-def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0.0) -> list:
+def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0.0,
+             readout=None) -> list:
     """Track scenario ``name`` (acceptance noise) as seen through a lens with distortion
     ``lens`` (None: a pinhole), depth captured ``delay`` s after the colour; ``"stamped"``:
-    each frame's own delay (Detections.depth_delay), within +-16 ms, changing every frame."""
+    each frame's own delay (Detections.depth_delay), within +-16 ms, changing every frame; a
+    rolling shutter reading its rows in ``readout`` s."""
     rng = np.random.default_rng(seed)
     truth, camera, layout = scenario(name, rng=rng)
-    camera = replace(camera, dist=lens, depth_delay=None if delay == "stamped" else delay)
+    camera = replace(camera, dist=lens, depth_delay=None if delay == "stamped" else delay,
+                     readout=readout)
     frames = simulate_detections(truth, camera, layout, acceptance_noise(len(truth.t)), rng)
     tracker = Tracker(camera, layout, config)
     if delay == "stamped":
@@ -234,16 +237,18 @@ def _tracked(name: str, config: TrackerConfig, lens=None, seed: int = 2, delay=0
     return [tracker.step(f.detections) for f in frames]
 
 
-@pytest.mark.parametrize(("name", "states", "lens", "delay"), [
-    ("pronation", "rigid", None, 0.0), ("mix", "rigid", None, 0.0), ("mix", "slide", None, 0.0),
-    ("mix", "offset", None, 0.0), ("mix", "rigid", XTION_LENS, 0.0),
-    ("pronation", "offset", XTION_LENS, 0.0), ("mix", "slide", None, 0.014),
-    ("mix", "slide", None, "stamped"),
+@pytest.mark.parametrize(("name", "states", "lens", "delay", "readout"), [
+    ("pronation", "rigid", None, 0.0, None), ("mix", "rigid", None, 0.0, None),
+    ("mix", "slide", None, 0.0, None), ("mix", "offset", None, 0.0, None),
+    ("mix", "rigid", XTION_LENS, 0.0, None), ("pronation", "offset", XTION_LENS, 0.0, None),
+    ("mix", "slide", None, 0.014, None), ("mix", "slide", None, "stamped", None),
+    ("mix", "slide", XTION_LENS, 0.0, 0.025), ("mix", "offset", None, -0.01, 0.03),
 ])  # fmt: skip
 def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name, states, lens,
-                                                        delay):
+                                                        delay, readout):
     """Acceptance noise: clutter, misses, an occlusion, irregular frame intervals; with the
-    skin slide in the state, its spread learned as the track goes; through a real lens."""
+    skin slide in the state, its spread learned as the track goes; through a real lens; a depth
+    delay; a rolling shutter."""
     taken = []
     compiled_frame = Tracker._compiled_frame
 
@@ -254,10 +259,10 @@ def test_tracker_compiled_path_matches_the_generic_path(monkeypatch, step, name,
 
     monkeypatch.setattr(Tracker, "_compiled_frame", counted)
     config = STATES[states]
-    fast = _tracked(name, config, lens, delay=delay)
+    fast = _tracked(name, config, lens, delay=delay, readout=readout)
     assert sum(taken) > 0.9 * len(taken)  # the compiled step took nearly every frame
     monkeypatch.setattr(Tracker, "_compiled_frame", lambda self, det, track, dt: None)
-    generic = _tracked(name, config, lens, delay=delay)
+    generic = _tracked(name, config, lens, delay=delay, readout=readout)
     _assert_same_results(fast, generic)
 
 

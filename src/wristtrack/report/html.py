@@ -176,6 +176,7 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     timing = _depth_timing(summary, settings)
     if timing:
         rows.append(("Depth timing", timing))
+    rows.append(("Colour shutter", _shutter(summary.get("camera") or {})))
     offset = summary.get("depth_registration")
     if offset:  # --follow-offset: the depth map's offset from the colour image, as estimated
         rows.append(("Depth registration", _registration(offset)))
@@ -221,6 +222,16 @@ def _depth_timing(summary: dict[str, Any], settings: dict[str, Any]) -> str | No
                 f"ms, from the camera's stamps of {timing['frames']} frames), each {moved}")
     return ("not stated: each depth frame taken as captured with its colour frame (give "
             "camera.json depth_delay_s where the streams are paired by time stamp)")
+
+
+def _shutter(camera: dict[str, Any]) -> str:
+    """The colour camera's shutter (camera.json's readout_s)."""
+    readout = camera.get("readout_s")
+    if not readout:
+        return ("global, or a rolling shutter not stated (give camera.json readout_s, the "
+                "seconds from its top row to its bottom one)")
+    return (f"rolling, its rows read over {_fmt(1e3 * readout, 1)} ms, each marker taken where "
+            "it was when its row was read")
 
 
 def _registration(offset: dict[str, Any]) -> str:

@@ -36,6 +36,7 @@ from wristtrack.geometry import (
     rotation_of_quat_into,
 )
 from wristtrack.tracking.kernel_algebra import cholesky_into, forward_solve_into, moments_into
+from wristtrack.tracking.kernel_camera import rolling_shift, skin_slope
 from wristtrack.tracking.merged import may_merge
 
 OK = 0  # the frame is done: the outputs are valid
@@ -46,8 +47,8 @@ DECLINED = 1  # the generic path must take this frame (see the module's docstrin
     _SCALE, _FX, _FY, _CX, _CY, _U_MAX, _V_MAX, _PIXEL_VAR, _DEPTH_COEFF, _DEPTH_FLOOR,
     _DEPTH_OFFSET, _DEPTH_Z0, _SQRT_QA, _SQRT_QW, _FACING_COS, _GATE_CONSTANT, _HALF_GATE,
     _REGISTRATION_PX, _GRAZING_COS, _MERGE_REACH, _DEPTH_OBLIQUE, _SLIDE_TAU, _DISTORTED,
-    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _DEPTH_DELAY, _N_SCALARS,
-) = range(28)  # fmt: skip
+    _N_OFFSET, _SQRT_DRIFT, _OFFSET_GRAZING_COS, _DEPTH_DELAY, _READOUT, _N_SCALARS,
+) = range(29)  # fmt: skip
 _SLIDE_VAR = _N_SCALARS  # the slide's stationary variances (3)
 _DIST = _SLIDE_VAR + 3  # the lens distortion, Camera's (k1, k2, p1, p2, k3, k4, k5, k6)
 _N_PAR = _DIST + 8
@@ -148,8 +149,9 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
     for i in range(3):
         sq_s[i] = math.sqrt(par[_SLIDE_VAR + i] * (1.0 - keep * keep))
     sp = np.zeros(3)  # a point's slide, propagated, along the hand's axes
-    delay = par[_DEPTH_DELAY]  # the depth frame's capture after the colour's (s), and a
-    vs, ws = np.empty(3), np.empty(3)  # point's velocity and angular velocity (W0)
+    delay = par[_DEPTH_DELAY]  # the depth frame's capture after the colour's (s)
+    readout = par[_READOUT]  # a rolling shutter's, top row to bottom (s)
+    vs, ws = np.empty(3), np.empty(3)  # the sigma point's velocity and angular velocity (W0)
     scale = par[_SCALE]
     sqdt = math.sqrt(dt)
     sa_v = par[_SQRT_QA] * sqdt  # velocity change per unit noise offset: sqrt(q_a / dt) dt
@@ -216,7 +218,7 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
         pz = x[11] + dt * x[14] + W[s, m + 5]
         for i in range(3 if n_off or delay else 0):
             nc[i] = R_c0[i, 0] * R[0, 2] + R_c0[i, 1] * R[1, 2] + R_c0[i, 2] * R[2, 2]
-        if delay:  # the sigma point's rates, W0
+        if delay or readout:  # the sigma point's rates, W0
             for i in range(3):
                 vs[i] = x[12 + i] + W[s, m + 6 + i]
                 ws[i] = x[15 + i] + W[s, m + 9 + i]
@@ -231,9 +233,14 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
             Y = R_c0[1, 0] * hx + R_c0[1, 1] * hy + R_c0[1, 2] * hz + t_c0[1]
             Z = R_c0[2, 0] * hx + R_c0[2, 1] * hy + R_c0[2, 2] * hz + t_c0[2]
             W[s, j], W[s, J + j] = _pixel(X, Y, Z, par)
+            if readout:  # seen where it is when a rolling shutter reads the row it is on
+                du, dv = rolling_shift(R_c0, vs, ws, hx - px, hy - py, hz - pz, X, Y, Z,
+                                       W[s, J + j], par[_FX], par[_FY], par[_V_MAX] + 0.5, readout)
+                W[s, j] += du
+                W[s, J + j] += dv
             W[s, 2 * J + j] = Z
             if n_off or delay:
-                slope = _slope(X, Y, Z, nc[0], nc[1], nc[2], par[_OFFSET_GRAZING_COS])
+                slope = skin_slope(X, Y, Z, nc[0], nc[1], nc[2], par[_OFFSET_GRAZING_COS])
             if n_off:  # its depth read off the blob, on the skin's slope
                 W[s, 2 * J + j] += slope * (nc[0] * ro[0] / par[_FX] + nc[1] * ro[1] / par[_FY])
             if delay:  # in a depth frame captured delay after the colour: the skin moved
@@ -243,16 +250,6 @@ def _sigma_points(x, L, dt, layout, sliding, R_c0, t_c0, par, qs, qc, W):
                            + R[2, 2] * (vs[2] + ws[0] * rb - ws[1] * ra))
                 W[s, 2 * J + j] -= delay * towards * slope / Z
     qc[1:] = -qc[1:]
-
-
-def _slope(X, Y, Z, n0, n1, n2, grazing_cos):
-    """-z^2 / (n . p) of observation.registration_depth_jacobian at the camera-frame point
-    (X, Y, Z) on a surface of normal n (taken no steeper than at ``grazing_cos``): times n_x / fx
-    (n_y / fy) the depth's change per pixel of offset along u (v)."""
-    d = X * n0 + Y * n1 + Z * n2
-    steepest = grazing_cos * math.sqrt(X * X + Y * Y + Z * Z)
-    d = min(d, -steepest) if d < 0.0 else max(d, steepest)
-    return -Z * Z / d
 
 
 def _pixel(X, Y, Z, par):
@@ -350,7 +347,7 @@ def _add_shared_noise(C, Rc, tc, layout, slide, par):
             G[J + j, i] = 0.5 * (v_plus - v_minus)
             G[2 * J + j, i] = dz
         # the misregistration: the surface plane's depth one sigma off the blob in u and in v
-        slope = _slope(X, Y, Z, Rc[0, 2], Rc[1, 2], Rc[2, 2], par[_GRAZING_COS])
+        slope = skin_slope(X, Y, Z, Rc[0, 2], Rc[1, 2], Rc[2, 2], par[_GRAZING_COS])
         G[2 * J + j, 3] = s_reg * Rc[0, 2] * slope / par[_FX]
         G[2 * J + j, 4] = s_reg * Rc[1, 2] * slope / par[_FY]
     for r in range(3 * J):
@@ -493,7 +490,7 @@ def _write_state(q, pvw, sl, ro, par, out):
 HELPERS = (
     "quat_exp_into", "quat_mul_into", "quat_of_rotation_into", "rotation_of_quat_into",
     "depth_sigma", "oblique_sigma", "distorted", "cholesky_into", "forward_solve_into",
-    "_sigma_points", "_slope", "_pixel", "moments_into", "_predicted", "_camera_pose",
-    "_all_visible", "may_merge", "_add_noise", "_add_shared_noise", "_associate", "_correct",
-    "_write_state",
+    "_sigma_points", "skin_slope", "rolling_shift", "_pixel", "moments_into", "_predicted",
+    "_camera_pose", "_all_visible", "may_merge", "_add_noise", "_add_shared_noise", "_associate",
+    "_correct", "_write_state",
 )  # fmt: skip

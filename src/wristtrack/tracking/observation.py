@@ -218,13 +218,17 @@ class MarkerObservation:
         pts = self._placed(X, R_ch, t_ch)
         out = np.empty((X.shape[0], self.n_markers, self.k))
         out[..., :2] = self.camera.project(pts)
+        rolled = self.rates_of is not None and self.camera.readout
+        if rolled or self.depth_delay:
+            rates = point_rates(*self.rates_of(X), self.R_c0, pts - t_ch[:, None])
+        if rolled:  # a rolling shutter read each marker's row at its own time
+            out[..., :2] += rolling_shift(self.camera, pts, rates, out[..., 1])
         if self.k == 3:
             out[..., 2] = pts[..., 2]
             if self.offset_of is not None:  # each depth read off its blob, on the skin's slope
                 out[..., 2] += depth_offset_change(pts, R_ch[:, None, :, 2], self.offset_of(X),
                                                    self.camera.fx, self.camera.fy)
             if self.depth_delay:  # read in a depth frame captured before or after the colour
-                rates = point_rates(*self.rates_of(X), self.R_c0, pts - t_ch[:, None])
                 out[..., 2] += lag_depth_change(pts, R_ch[:, None, :, 2], rates,
                                                 self.depth_delay)
         return out.reshape(X.shape[0], -1)
@@ -333,6 +337,22 @@ def point_rates(v: np.ndarray, w: np.ndarray, R_c0: np.ndarray, arms: np.ndarray
     (camera axes) on hands moving at v and turning at w ((S, 3) each, W0, a state's rates):
     R_c0 v + (R_c0 w) x arm."""
     return (v @ R_c0.T)[:, None] + np.cross((w @ R_c0.T)[:, None], arms)
+
+
+def rolling_shift(camera: Camera, points: np.ndarray, rates: np.ndarray,
+                  v: np.ndarray) -> np.ndarray:
+    """(..., 2) where camera-frame ``points`` (..., 3) moving at ``rates`` (..., 3) m/s are
+    seen by a rolling shutter, from where they are at the frame's time, seen on image rows ``v``
+    (...): the point moves along its image path (at the pinhole's image velocity; the lens
+    distortion changes it by its own few per cent) until the row it has reached is read. On a
+    straight path at image speed (du, dv) that is t = row_time(v) / (1 - readout dv / height),
+    row_time's fixed point."""
+    z = points[..., 2]
+    velocity = np.stack([camera.fx * (rates[..., 0] * z - points[..., 0] * rates[..., 2]),
+                         camera.fy * (rates[..., 1] * z - points[..., 1] * rates[..., 2])], -1)
+    velocity /= (z * z)[..., None]
+    when = camera.row_time(v) / (1.0 - camera.readout * velocity[..., 1] / camera.height)
+    return when[..., None] * velocity
 
 
 def lag_depth_change(points: np.ndarray, normals: np.ndarray, rates: np.ndarray,
