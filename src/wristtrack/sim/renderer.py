@@ -54,8 +54,9 @@ class RenderedFrame:
     """One rendered frame and its marker truth at ``timestamp``.
 
     ``uv`` (6,2) is the centroid of each marker's projected rim polygon (what an ideal blob
-    detector finds; not exactly the projection of the marker centre), ``visible`` (6,) the
-    fraction of the marker's area that can be seen (0 when it faces away or is covered).
+    detector finds; not exactly the projection of the marker centre; under a rolling shutter,
+    where the row it is on was read), ``visible`` (6,) the fraction of the marker's area that
+    can be seen (0 when it faces away or is covered).
     """
 
     timestamp: float
@@ -157,6 +158,21 @@ class Renderer:
 
     # ------------------------------------------------------------------------ drawing
 
+    def _rims(self, mo: _Moment) -> np.ndarray:
+        """(6, M, 2) the markers' rim polygons in the image at moment ``mo``."""
+        rim = self.model.rim
+        if mo.markers is not self.scene.layout.points:
+            rim = rim + (mo.markers - self.scene.layout.points)[:, None, :]
+        return self.cam.project(rim @ mo.layer.R.T + mo.layer.t)
+
+    def _rolled_centres(self, t: float, cents: np.ndarray) -> np.ndarray:
+        """The markers' rim centroids (6, 2) where a rolling shutter sees them: each at the
+        moment its own row is read (Camera.row_time), from ``cents``, the frame moment's."""
+        for _ in range(3):  # the row moves with the marker: a fixed point, reached in a few
+            cents = np.array([polygon_centroid(self._rims(self.moment(t + float(dt)))[k])
+                              for k, dt in enumerate(self.cam.row_time(cents[:, 1]))])
+        return cents
+
     def _markers(self, region: Region, mo: _Moment, colour, ids, zbuf) -> tuple[np.ndarray, ...]:
         """Blend the facing markers into ``colour`` where the pixel sees the back of the hand, or
         a finger's base at the marker's plane (``zbuf``: the region's depth).
@@ -165,16 +181,12 @@ class Renderer:
         """
         rx0, ry0, rx1, ry1 = region
         R, tr = mo.layer.R, mo.layer.t
-        rim = self.model.rim
-        if mo.markers is not self.scene.layout.points:
-            rim = rim + (mo.markers - self.scene.layout.points)[:, None, :]
-        rim_cam = rim @ R.T + tr  # (6,M,3)
         centre = mo.markers @ R.T + tr
         normal = R[:, 2]
         facing = (-centre @ normal > 0.0) & (centre[:, 2] > 0)
         shade = AMBIENT + DIFFUSE * max(float(normal @ LIGHT), 0.0)
         blue = (MARKER_BLUE * shade).astype(np.float32)
-        uv_all = self.cam.project(rim_cam)
+        uv_all = self._rims(mo)
         cents = np.array([polygon_centroid(q) for q in uv_all])
         vis = np.zeros(6)
         S = _SUPERSAMPLE
@@ -318,6 +330,8 @@ class Renderer:
             self.caster.draw(region, lagged.layer, bg.colour[y0:y1, x0:x1].copy(), z_mid,
                              bg.ids[y0:y1, x0:x1].copy())
         depth = self.depth.capture(z_mid, region) if scene.depth else None
+        if cam.readout:
+            cents = self._rolled_centres(t, cents)
         return RenderedFrame(float(t), bgr, depth, cents, vis)
 
     def _row_weights(self, times: np.ndarray, t: float, y0: int, y1: int) -> np.ndarray:
