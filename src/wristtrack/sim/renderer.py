@@ -49,6 +49,13 @@ _SUPERSAMPLE = 8  # marker coverage resolution per pixel side
 _ON_FINGER_M = 0.004
 
 
+def _band(weights: np.ndarray) -> tuple[int, int]:
+    """The rows [a, b) with a share of a sub-frame (``weights`` (rows,)): one band, as each
+    row's exposure follows the one above it."""
+    inside = np.flatnonzero(weights > 0)
+    return (int(inside[0]), int(inside[-1]) + 1) if inside.size else (0, 0)
+
+
 @dataclass(frozen=True)
 class RenderedFrame:
     """One rendered frame and its marker truth at ``timestamp``.
@@ -297,22 +304,28 @@ class Renderer:
         z_mid, light = None, None
         for i in [mid] + [j for j in range(len(times)) if j != mid]:
             layer = moments[i].layer
-            colour = bg.colour[y0:y1, x0:x1].copy()
-            zbuf = bg.z[y0:y1, x0:x1].copy()
-            ids = bg.ids[y0:y1, x0:x1].copy()
-            self.caster.draw(region, layer, colour, zbuf, ids)
+            # a rolling shutter's sub-frame is drawn only on the rows it is part of (the
+            # middle one everywhere: its shadow, depth and truth are the frame's)
+            a, b = (0, y1 - y0) if rows is None or i == mid else _band(rows[i])
+            if a == b:
+                continue
+            box = (x0, y0 + a, x1, y0 + b)
+            colour = bg.colour[y0 + a:y0 + b, x0:x1].copy()
+            zbuf = bg.z[y0 + a:y0 + b, x0:x1].copy()
+            ids = bg.ids[y0 + a:y0 + b, x0:x1].copy()
+            self.caster.draw(box, layer, colour, zbuf, ids)
             if i == mid:
                 light = self._shadow(layer.R, layer.t, ids)
             elif light is not None:  # the shadow of the middle sub-frame, on the background
-                light_i = np.where(ids <= CLUTTER, light, np.float32(1.0))
+                light_i = np.where(ids <= CLUTTER, light[a:b], np.float32(1.0))
             if light is not None:
                 li = light if i == mid else light_i
                 cv2.multiply(colour, cv2.merge((li, li, li)), dst=colour)
-            c, v = self._markers(region, moments[i], colour, ids, zbuf)
+            c, v = self._markers(box, moments[i], colour, ids, zbuf)
             if rows is None:
                 acc += colour
             else:  # each row its share of the sub-frame (its own exposure)
-                acc += colour * rows[i][:, None, None]
+                acc[a:b] += colour * rows[i][a:b, None, None]
             if i == mid:
                 z_mid, cents, vis = zbuf, c, v
         acc = cv2.multiply(acc, self.vignette[y0:y1, x0:x1],
