@@ -94,7 +94,7 @@ def _rs():
 
 def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, lost_depth=(),
                               baseline=0.0, depth_lag=lambda i: 0.0, domain="hardware_clock",
-                              exposure=None):
+                              exposure=None, name="wristtrack test software device"):
     """Record the first ``n`` frames of a recording folder through the SDK: a software device
     with a colour and a depth sensor (the folder's intrinsics, identity extrinsics, as
     registered depth is, or the depth sensor ``baseline`` metres beside the colour one, so
@@ -103,7 +103,7 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
     ``depth_lag(i)`` s after its colour frame, both in the timestamp ``domain``; with
     ``exposure(i)`` (colour, depth; s) the frames also carry the middle of their exposure
     (SENSOR_TIMESTAMP metadata, us), which ends as their transfer starts (FRAME_TIMESTAMP, the
-    stamp). Returns the folder's camera."""
+    stamp). ``name``: the device's, as the recording reports it. Returns the folder's camera."""
     rs = _rs()
     rec = FolderRecording(folder)
     cam = rec.camera
@@ -128,7 +128,7 @@ def write_realsense_recording(path, folder, n=12, dist=None, depth_scale=None, l
     depth_profile.register_extrinsics_to(color_profile, extrinsics)
     depth_sensor.add_read_only_option(rs.option.depth_units, scale)
     dev.create_matcher(rs.matchers.dlr_c)
-    dev.register_info(rs.camera_info.name, "wristtrack test software device")
+    dev.register_info(rs.camera_info.name, name)
     recorder = rs.recorder(str(path), dev)
     depth_sensor.open(depth_profile)
     color_sensor.open(color_profile)
@@ -416,6 +416,27 @@ def test_track_reads_each_depth_at_its_stamped_delay(reach, cut_recording, tmp_p
     report = (tmp_path / "bag" / "report.html").read_text(encoding="utf-8")
     assert ("captured 8.0 ms after its colour frame on average (8.0 to 8.0 ms, from the "
             "camera&#x27;s stamps of 12 frames)") in report
+
+
+def test_a_d435_whose_readout_is_not_stated_is_warned_of(short, tmp_path):
+    """A D435's colour sensor is a rolling shutter: without readout_s the run says so
+    (summary.json's warnings, which the report and stderr repeat); a camera.json stating it
+    silences that, and a D455 (a global shutter) has nothing to say."""
+    write_realsense_recording(tmp_path / "d435.db3", short, n=3, name="Intel RealSense D435")
+    assert main(["track", str(tmp_path / "d435.db3"), "--out", str(tmp_path / "unsaid"),
+                 "--no-report", "--no-progress"]) in (0, 3)  # 3 frames may not initialise
+    warned = json.loads((tmp_path / "unsaid" / "summary.json").read_text())["warnings"]
+    assert any("Intel RealSense D435's colour sensor is a rolling shutter" in w
+               and "readout_s" in w for w in warned), warned
+    camera = {**json.loads((short / "camera.json").read_text()), "readout_s": 0.025}
+    (tmp_path / "camera.json").write_text(json.dumps(camera))
+    assert main(["track", str(tmp_path / "d435.db3"), "--camera", str(tmp_path / "camera.json"),
+                 "--out", str(tmp_path / "stated"), "--no-report", "--no-progress"]) in (0, 3)
+    stated = json.loads((tmp_path / "stated" / "summary.json").read_text())["warnings"]
+    assert not any("rolling shutter" in w for w in stated)
+    write_realsense_recording(tmp_path / "d455.db3", short, n=1, name="Intel RealSense D455")
+    with open_recording(tmp_path / "d455.db3") as rec:
+        assert rec.warnings == []  # a global shutter
 
 
 def test_a_live_session_records_its_cameras_depth_delay(reach, tmp_path):

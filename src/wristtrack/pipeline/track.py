@@ -273,8 +273,9 @@ def _finish(
         settings=settings,
         skipped_frames=run.bad_frames,
         frames_without_depth=run.without_depth,
-        # what the tracker must say about its poses, e.g. an unresolved planar flip
-        warnings=list(getattr(tracker, "warnings", [])),
+        # what the source and the tracker must say about the poses, e.g. an unresolved planar
+        # flip, a rolling shutter of unknown readout
+        warnings=[*getattr(recording, "warnings", []), *getattr(tracker, "warnings", [])],
         # the markers' noise as the recording showed it (tracking/noise_scale.py)
         measurement_noise=tracker.learned_noise.describe(config.measurement),
         depth_registration=tracker.depth_registration,  # --follow-offset's estimate, else None

@@ -25,6 +25,9 @@ from wristtrack.io.base import Frame, Recording, pairing_tolerance, reject_optio
 
 INSTALL = "pip install 'wristtrack[realsense]'"
 RECORDING_SUFFIXES = (".bag", ".db3")
+# RealSense models whose colour sensor is a rolling shutter (the OV2740 of the D415, D435 and
+# L515); the D405's and D45x's colour is a global shutter (realsense-ros #3451).
+ROLLING_COLOUR_MODELS = ("D415", "D435", "L515")
 FRAME_TIMEOUT_S = 5.0  # no frameset for this long: the device stalled (or was unplugged)
 POLL_S = 0.1  # waits in steps this long, so a recording's end is seen at once
 
@@ -87,6 +90,17 @@ def exposure_lead(frame: Any, rs: Any) -> float:
         return 0.0
     lead = (frame.get_frame_metadata(sent) - frame.get_frame_metadata(middle)) / 1e6
     return lead if 0.0 <= lead < 1.0 else 0.0  # (the counter wrapped between them)
+
+
+def _unstated_rolling_shutter(device_name: str) -> list[str]:
+    """The warning for a camera whose colour sensor is a rolling shutter of unknown readout."""
+    model = next((m for m in ROLLING_COLOUR_MODELS if m in device_name), None)
+    if model is None:
+        return []
+    return [f"the {device_name}'s colour sensor is a rolling shutter and the camera states no "
+            "readout_s: a fast-moving marker is seen where it was when its row was read, a few "
+            "pixels from where the tracker looks; give --camera a camera.json with readout_s "
+            "(seconds from its top row to its bottom one)"]
 
 
 def capture_offset(color: Any, depth: Any, rs: Any) -> float | None:
@@ -185,6 +199,7 @@ class RealSenseRecording(Recording):
         self.device_name = device.get_info(rs.camera_info.name)
         if camera is None:
             camera = camera_from_intrinsics(intr, scale, rs)
+        self.warnings = [] if camera.readout else _unstated_rolling_shutter(self.device_name)
         registered = self.has_depth and _already_registered(
             streams[rs.stream.depth].as_video_stream_profile(),
             streams[rs.stream.color].as_video_stream_profile())

@@ -358,7 +358,8 @@ def track_live(
                   "hand_layout_from": "hand.json" if source.hand is not None else "still start"},
         skipped_frames=skipped,
         frames_without_depth=log.without_depth,
-        warnings=list(getattr(tracker, "warnings", [])),  # e.g. an unresolved planar flip
+        # e.g. an unresolved planar flip, a rolling shutter of unknown readout
+        warnings=[*getattr(source, "warnings", []), *getattr(tracker, "warnings", [])],
         depth_timing=tracker.depth_timing.to_dict(),  # from the camera's stamps, where it has them
         interrupted=False,
         live={k: live[k] for k in ("frames", "latency_ms", "ended_by")},
