@@ -94,8 +94,7 @@ def exposure_lead(frame: Any, rs: Any) -> float:
 
 def _unstated_rolling_shutter(device_name: str) -> list[str]:
     """The warning for a camera whose colour sensor is a rolling shutter of unknown readout."""
-    model = next((m for m in ROLLING_COLOUR_MODELS if m in device_name), None)
-    if model is None:
+    if not any(model in device_name for model in ROLLING_COLOUR_MODELS):
         return []
     return [f"the {device_name}'s colour sensor is a rolling shutter and the camera states no "
             "readout_s: a fast-moving marker is seen where it was when its row was read, a few "
@@ -132,11 +131,11 @@ class RealSenseRecording(Recording):
     timestamps are the middle of the colour frames' exposures (the SDK's frame timestamps
     where the device reports no exposure: :func:`exposure_lead`) in seconds from the first
     frame's; how long after the colour the depth was captured is the frame's ``depth_delay``
-    (:func:`capture_offset`).
-    A colour frame whose depth frame is not of the same moment (``pairing_tolerance``)
-    comes without depth. A
-    recording plays at its own pace (``real_time=True``, as a camera) or as fast as it is read.
-    ``camera`` overrides the intrinsics read from the device.
+    (:func:`capture_offset`). A colour frame whose depth frame is not of the same moment
+    (``pairing_tolerance``) comes without depth. A recording plays at its own pace
+    (``real_time=True``, as a camera) or as fast as it is read. ``camera`` overrides the
+    intrinsics read from the device. ``warnings``: what a run must say about its poses (a
+    rolling shutter of unknown readout).
     """
 
     kind = "RealSense camera"
