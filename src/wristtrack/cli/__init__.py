@@ -9,7 +9,7 @@ import argparse
 import sys
 
 from wristtrack import __version__
-from wristtrack.cli import runs, simulate, track
+from wristtrack.cli import calibrate, runs, simulate, track
 from wristtrack.errors import WristtrackError
 
 
@@ -47,6 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_commands(sub)
     runs.add_commands(sub)
     simulate.add_commands(sub)
+    calibrate.add_commands(sub)
     return parser
 
 
