@@ -98,7 +98,7 @@ def _unstated_rolling_shutter(device_name: str) -> list[str]:
         return []
     return [f"the {device_name}'s colour sensor is a rolling shutter and the camera states no "
             "readout_s: a fast-moving marker is seen where it was when its row was read, a few "
-            "pixels from where the tracker looks; measure it (wristtrack readout RECORDING) and "
+            "pixels from where the tracker looks; measure it (wristtrack timing RECORDING) and "
             "give --camera a camera.json with readout_s"]
 
 
