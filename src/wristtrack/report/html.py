@@ -221,7 +221,8 @@ def _depth_timing(summary: dict[str, Any], settings: dict[str, Any]) -> str | No
                 f"frame on average ({_fmt(timing['min_ms'], 1)} to {_fmt(timing['max_ms'], 1)} "
                 f"ms, from the camera's stamps of {timing['frames']} frames), each {moved}")
     return ("not stated: each depth frame taken as captured with its colour frame (give "
-            "camera.json depth_delay_s where the streams are paired by time stamp)")
+            "camera.json depth_delay_s where the streams are paired by time stamp; wristtrack "
+            "timing measures it)")
 
 
 def _shutter(camera: dict[str, Any]) -> str:
@@ -229,7 +230,7 @@ def _shutter(camera: dict[str, Any]) -> str:
     readout = camera.get("readout_s")
     if not readout:
         return ("global, or a rolling shutter not stated (give camera.json readout_s, the "
-                "seconds from its top row to its bottom one)")
+                "seconds from its top row to its bottom one; wristtrack timing measures it)")
     return (f"rolling, its rows read over {_fmt(1e3 * readout, 1)} ms, each marker taken where "
             "it was when its row was read")
 
