@@ -114,7 +114,7 @@ def frame_constants(
     par[_REGISTRATION_PX], par[_GRAZING_COS] = noise.registration_px, GRAZING_COS
     par[_OFFSET_GRAZING_COS] = OFFSET_GRAZING_COS
     par[_DEPTH_DELAY] = obs.depth_delay
-    par[_READOUT] = (camera.readout or 0.0) if obs.rates_of is not None else 0.0
+    par[_READOUT] = obs.readout
     par[_MERGE_REACH] = merged.merge_reach(camera.fx) if merged_blobs else 0.0
     sliding = np.zeros(obs.n_markers)
     par[_DISTORTED] = float(camera.has_distortion)

@@ -154,6 +154,8 @@ class MarkerObservation:
         self.rates_of = rates_of
         self.lagged = use_depth and rates_of is not None
         self.read_depth_at(camera.depth_delay or 0.0)
+        # a rolling shutter's readout (s, Camera.readout), where the rates tell the image path
+        self.readout = (camera.readout or 0.0) if rates_of is not None else 0.0
         if offset_of is not None:
             noise = replace(noise, registration_px=0.0)
         self.noise = noise
@@ -218,10 +220,9 @@ class MarkerObservation:
         pts = self._placed(X, R_ch, t_ch)
         out = np.empty((X.shape[0], self.n_markers, self.k))
         out[..., :2] = self.camera.project(pts)
-        rolled = self.rates_of is not None and self.camera.readout
-        if rolled or self.depth_delay:
+        if self.readout or self.depth_delay:
             rates = point_rates(*self.rates_of(X), self.R_c0, pts - t_ch[:, None])
-        if rolled:  # a rolling shutter read each marker's row at its own time
+        if self.readout:  # a rolling shutter read each marker's row at its own time
             out[..., :2] += rolling_shift(self.camera, pts, rates, out[..., 1])
         if self.k == 3:
             out[..., 2] = pts[..., 2]
