@@ -16,6 +16,7 @@ from wristtrack.tracking.observation import MarkerObservation
 from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
 
 DELAY_S = 0.012  # a depth delay within half a frame at 30 fps, for the delay row
+READOUT_S = 0.025  # a rolling shutter's readout within a frame at 30 fps, for its row
 
 
 @dataclass
@@ -35,6 +36,9 @@ class StepTiming:
     # the default with a depth delay stated (camera.json depth_delay_s): each depth read where
     # the hand's rates move it
     delay_ms: float = float("nan")
+    # the default with a rolling shutter's readout stated (camera.json readout_s): each marker
+    # seen where its row was read
+    readout_ms: float = float("nan")
 
 
 class _GenericTracker(Tracker):
@@ -71,12 +75,14 @@ def time_tracker_step(n_frames: int = 300, seed: int = 0, stonesoup_frames: int 
     offset = _time_steps(Tracker(camera, layout, TrackerConfig(follow_offset=True)), frames3)
     delay = _time_steps(Tracker(replace(camera, depth_delay=DELAY_S), layout, TrackerConfig()),
                         frames3)
+    readout = _time_steps(Tracker(replace(camera, readout=READOUT_S), layout, TrackerConfig()),
+                          frames3)
     peer = _time_filterpy(tracker, frames, camera, layout)
     soup = _time_stonesoup(frames3[: stonesoup_frames + 1], camera, layout)
     return StepTiming(
         ours * 1e3, None if peer is None else peer * 1e3, len(frames3) - 1,
         None if soup is None else soup * 1e3, stonesoup_frames, generic * 1e3, kind,
-        as_noise * 1e3, offset * 1e3, delay * 1e3,
+        as_noise * 1e3, offset * 1e3, delay * 1e3, readout * 1e3,
     )  # fmt: skip
 
 
@@ -171,7 +177,8 @@ def step_section(step: StepTiming) -> list[str]:
         "hand too, 14), with the depth map's offset from the colour image in the state "
         "as well (`--follow-offset`: 16) and with a depth delay stated (camera.json "
         f"`depth_delay_s` {DELAY_S * 1e3:g} ms: each depth read where the hand's rates move "
-        "it) on the same frames.",
+        f"it) or a rolling shutter's readout (`readout_s` {READOUT_S * 1e3:g} ms: each marker "
+        "seen where it was when its row was read) on the same frames.",
         "",
         "| | median per step (ms) | FilterPy's time / this one |",
         "|---|---|---|",
@@ -185,6 +192,8 @@ def step_section(step: StepTiming) -> list[str]:
         f"{faster(step.filterpy_ms, step.offset_ms)} |",
         f"| wristtrack step, depth delay stated ({step.kind}) | {step.delay_ms:.3f} | "
         f"{faster(step.filterpy_ms, step.delay_ms)} |",
+        f"| wristtrack step, rolling shutter's readout stated ({step.kind}) | "
+        f"{step.readout_ms:.3f} | {faster(step.filterpy_ms, step.readout_ms)} |",
         f"| FilterPy UKF predict+update | {_ms(step.filterpy_ms)} | 1x |",
         f"| Stone Soup tracker step (UKF predict, PDA over the same 9 blobs for each marker, "
         f"update; median over {step.stonesoup_frames} frames) | {_ms(step.stonesoup_ms)} | "
