@@ -525,9 +525,7 @@ def test_preset_real_through_the_cli_and_bad_effects(tmp_path, capsys):
     assert "structured_light" in capsys.readouterr().out
     assert Camera.load(out / "camera.json").dist == realism.XTION_DIST
     assert np.ptp(HandLayout.load(out / "hand.json").points[:, 2]) > 0.004
-    # one compression, the side apart; the rolling shutter until the benchmarks measure it
-    assert set(realism.PRESET_REAL) == set(realism.EFFECTS) - {"h264", "left_hand",
-                                                                "rolling_shutter"}
+    assert set(realism.PRESET_REAL) == set(realism.EFFECTS) - {"h264", "left_hand"}
     with pytest.raises(ConfigError, match="unknown simulator effect.*sparkle"):
         make_scene("deviation", effects=["sparkle"])
     with pytest.raises(ConfigError, match="hand side"):

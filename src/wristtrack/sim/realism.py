@@ -83,9 +83,8 @@ EFFECTS = (
     "rolling_shutter",
 )
 # A real camera and hand at once. One compression (JPEG, as ROS records colour); the side of
-# the hand is chosen separately. The rolling shutter joins it once the benchmarks have measured
-# it (its tracker model is new; the preset's figures in docs/BENCHMARKS.md are without it).
-PRESET_REAL = tuple(e for e in EFFECTS if e not in ("h264", "left_hand", "rolling_shutter"))
+# the hand is chosen separately.
+PRESET_REAL = tuple(e for e in EFFECTS if e not in ("h264", "left_hand"))
 
 # nonplanar: heights (m) above the wrist marker's plane, WRIST, CMC1, MCP2..MCP5.
 ARCH_HEIGHTS = np.array([0.0, -0.0045, 0.006, 0.007, 0.006, 0.0045])
