@@ -62,8 +62,9 @@ def test_a_stated_depth_delay_brings_a_rendered_reach_back_to_the_truth(tmp_path
     assert Camera.load(rec / "camera.json").depth_delay > 0.016
     assert main(["report", str(tmp_path / "run_stated")]) == 0  # and says when depth was read
     delay_ms = 1e3 * Camera.load(rec / "camera.json").depth_delay
-    assert (f"each depth frame captured {delay_ms:.1f} ms after its colour frame"
-            in (tmp_path / "run_stated" / "report.html").read_text(encoding="utf-8"))
+    assert (f"each depth frame captured {delay_ms:.1f} ms after its colour frame (camera.json), "
+            "read where the hand had moved" in (tmp_path / "run_stated" / "report.html")
+            .read_text(encoding="utf-8"))
     stated, unsaid = errors["stated"], errors["unsaid"]
     assert stated["position_rmse_mm"] < 0.6 * unsaid["position_rmse_mm"]
     assert stated["orientation_rmse_deg"] < 0.8 * unsaid["orientation_rmse_deg"]

@@ -7,6 +7,7 @@ motion (SciPy's rotations) to the time its own row gives; the rendered recording
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -67,5 +68,16 @@ def test_a_stated_readout_brings_a_rendered_reach_back_to_the_truth(tmp_path,
     assert stated["position_rmse_mm"] < 0.6 * unsaid["position_rmse_mm"]
     assert stated["orientation_rmse_deg"] < 0.8 * unsaid["orientation_rmse_deg"]
     assert main(["report", str(tmp_path / "run_stated")]) == 0  # and says how rows were read
-    assert (f"rolling, its rows read over {1e3 * readout:.1f} ms"
-            in (tmp_path / "run_stated" / "report.html").read_text(encoding="utf-8"))
+    report = (tmp_path / "run_stated" / "report.html").read_text(encoding="utf-8")
+    assert f"rolling, its rows read over {1e3 * readout:.1f} ms, each marker taken where" in report
+    # The paper's model has no rates to use it with: the run and its report say so.
+    paper = tmp_path / "run_paper"
+    assert main(["track", str(rec), "--out", str(paper), "--model", "paper",
+                 "--no-progress"]) == 0
+    summary = json.loads((paper / "summary.json").read_text())
+    assert summary["timing_modelled"] is False
+    assert json.loads((tmp_path / "run_stated" / "summary.json").read_text())["timing_modelled"]
+    assert [w for w in summary["warnings"] if "model paper has no rates" in w
+            and f"readout ({1e3 * readout:.1f} ms" in w]
+    assert "read at the frame&#x27;s time all the same" in (paper / "report.html").read_text(
+        encoding="utf-8")

@@ -176,7 +176,8 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     timing = _depth_timing(summary, settings)
     if timing:
         rows.append(("Depth timing", timing))
-    rows.append(("Colour shutter", _shutter(summary.get("camera") or {})))
+    rows.append(("Colour shutter", _shutter(summary.get("camera") or {},
+                                            summary.get("timing_modelled", True))))
     offset = summary.get("depth_registration")
     if offset:  # --follow-offset: the depth map's offset from the colour image, as estimated
         rows.append(("Depth registration", _registration(offset)))
@@ -225,14 +226,17 @@ def _depth_timing(summary: dict[str, Any], settings: dict[str, Any]) -> str | No
             "timing measures it)")
 
 
-def _shutter(camera: dict[str, Any]) -> str:
-    """The colour camera's shutter (camera.json's readout_s)."""
+def _shutter(camera: dict[str, Any], modelled: bool) -> str:
+    """The colour camera's shutter (camera.json's readout_s), and whether the run's model
+    could use it (summary.json's timing_modelled)."""
     readout = camera.get("readout_s")
     if not readout:
         return ("global, or a rolling shutter not stated (give camera.json readout_s, the "
                 "seconds from its top row to its bottom one; wristtrack timing measures it)")
-    return (f"rolling, its rows read over {_fmt(1e3 * readout, 1)} ms, each marker taken where "
-            "it was when its row was read")
+    taken = ("each marker taken where it was when its row was read" if modelled else
+             "each marker taken as read at the frame's time all the same (the model has no "
+             "rates to move the hand by; --model default has)")
+    return f"rolling, its rows read over {_fmt(1e3 * readout, 1)} ms, {taken}"
 
 
 def _registration(offset: dict[str, Any]) -> str:
