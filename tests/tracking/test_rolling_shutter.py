@@ -75,8 +75,9 @@ def test_a_stated_readout_brings_a_rendered_reach_back_to_the_truth(tmp_path,
     assert main(["track", str(rec), "--out", str(paper), "--model", "paper",
                  "--no-progress"]) == 0
     summary = json.loads((paper / "summary.json").read_text())
-    assert summary["timing_modelled"] is False
-    assert json.loads((tmp_path / "run_stated" / "summary.json").read_text())["timing_modelled"]
+    assert summary["settings"]["timing_modelled"] is False
+    assert json.loads((tmp_path / "run_stated" / "summary.json").read_text())["settings"][
+        "timing_modelled"]
     assert [w for w in summary["warnings"] if "model paper has no rates" in w
             and f"readout ({1e3 * readout:.1f} ms" in w]
     assert "read at the frame&#x27;s time all the same" in (paper / "report.html").read_text(

@@ -41,6 +41,7 @@ from wristtrack.pipeline.surveyed import (
     second_pass_begun,
 )
 from wristtrack.tracking.layout_survey import RunSurvey
+from wristtrack.tracking.models import reads_camera_timing
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 if TYPE_CHECKING:
@@ -275,14 +276,12 @@ def _finish(
         frames_without_depth=run.without_depth,
         # what the source and the tracker must say about the poses, e.g. an unresolved planar
         # flip, a rolling shutter of unknown readout
-        warnings=[*getattr(recording, "warnings", []), *getattr(tracker, "warnings", []),
-                  *_unmodelled_timing(tracker, recording.camera)],
+        warnings=[*getattr(recording, "warnings", []), *getattr(tracker, "warnings", [])],
         # the markers' noise as the recording showed it (tracking/noise_scale.py)
         measurement_noise=tracker.learned_noise.describe(config.measurement),
         depth_registration=tracker.depth_registration,  # --follow-offset's estimate, else None
         # each depth frame's capture after its colour frame (tracking/depth_timing.py)
         depth_timing=tracker.depth_timing.to_dict(),
-        timing_modelled=_models_timing(tracker),  # whether the model can use that and readout_s
         interrupted=interrupted,
         # Read back from disk: poses.csv is final here (smoothed, if asked for).
         kinematics=analyse_file(out / "poses.csv"),
@@ -296,23 +295,6 @@ def _finish(
     if tracker.R_c0 is None:  # the outputs say so too, but a run with no pose is a failure
         raise InitialisationError(no_initialisation_message(recording, summary.frames, tracker))
     return data
-
-
-def _models_timing(tracker: Tracker) -> bool:
-    """Whether the tracker's model reads a marker where the hand moved it between the frame's
-    time and its capture (a rolling shutter's row, a depth frame's delay): a state with rates.
-    The paper's models have none (nor do they use depth in their updates)."""
-    return getattr(tracker.model, "rates", None) is not None
-
-
-def _unmodelled_timing(tracker: Tracker, camera: Any) -> list[str]:
-    """The warning for a rolling shutter's readout that a model without rates had to ignore."""
-    if not camera.readout or _models_timing(tracker):
-        return []
-    return [f"model {tracker.model.name} has no rates in its state, so it took the rolling "
-            f"shutter's readout ({1e3 * camera.readout:.1f} ms, camera.json readout_s) as none: "
-            "each marker read at the frame's time, where the default model (--model default) "
-            "reads it where the hand was when its row was read"]
 
 
 def _smoothed_summary(out: Path, tracker: Tracker, config: TrackerConfig) -> SummaryAccumulator:
@@ -352,7 +334,8 @@ def settings_dict(config: TrackerConfig) -> dict[str, Any]:
             return None
         return value
 
-    return clean(asdict(config))
+    # and whether the model can use camera.json's readout_s and each depth frame's delay
+    return {**clean(asdict(config)), "timing_modelled": reads_camera_timing(config.model)}
 
 
 def _state_writer(out: Path, tracker: Tracker, append: bool = False) -> StateWriter:

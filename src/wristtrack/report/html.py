@@ -177,7 +177,7 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     if timing:
         rows.append(("Depth timing", timing))
     rows.append(("Colour shutter", _shutter(summary.get("camera") or {},
-                                            summary.get("timing_modelled", True))))
+                                            settings.get("timing_modelled", True))))
     offset = summary.get("depth_registration")
     if offset:  # --follow-offset: the depth map's offset from the colour image, as estimated
         rows.append(("Depth registration", _registration(offset)))
@@ -228,7 +228,7 @@ def _depth_timing(summary: dict[str, Any], settings: dict[str, Any]) -> str | No
 
 def _shutter(camera: dict[str, Any], modelled: bool) -> str:
     """The colour camera's shutter (camera.json's readout_s), and whether the run's model
-    could use it (summary.json's timing_modelled)."""
+    could use it (summary.json's settings.timing_modelled)."""
     readout = camera.get("readout_s")
     if not readout:
         return ("global, or a rolling shutter not stated (give camera.json readout_s, the "

@@ -223,3 +223,21 @@ def continuous_euler(euler: np.ndarray, near: np.ndarray, proper: bool = True) -
 
 
 MODELS = {"default": ConstantRateModel, "paper": PaperModel, "paper_rpy": PaperRPYModel}
+
+
+def reads_camera_timing(model: str) -> bool:
+    """Whether model ``model`` reads a marker where the hand moved it between the frame's time
+    and its capture (a rolling shutter's row, a depth frame's delay): a state with rates. The
+    paper's models have none."""
+    return hasattr(MODELS[model], "rates")
+
+
+def unmodelled_timing(model: str, readout: float | None) -> list[str]:
+    """The warning for a rolling shutter's readout (s, camera.json readout_s) that ``model``
+    has to ignore."""
+    if not readout or reads_camera_timing(model):
+        return []
+    return [f"model {model} has no rates in its state, so it took the rolling shutter's "
+            f"readout ({1e3 * readout:.1f} ms, camera.json readout_s) as none: each marker read "
+            "at the frame's time, where the default model (--model default) reads it where the "
+            "hand was when its row was read"]

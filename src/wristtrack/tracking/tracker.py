@@ -41,7 +41,7 @@ from wristtrack.tracking.config import TrackerConfig
 from wristtrack.tracking.depth_timing import DepthTiming
 from wristtrack.tracking.generic_step import fit_covariance, generic_step
 from wristtrack.tracking.initialise import InitResult, initialise
-from wristtrack.tracking.models import ConstantRateModel
+from wristtrack.tracking.models import ConstantRateModel, unmodelled_timing
 from wristtrack.tracking.neutral import MIN_FRAMES, StillStart, reanchor
 from wristtrack.tracking.observation import MarkerObservation, hand_in_camera, markers_on_blobs
 from wristtrack.tracking.offset_model import carry_offset, registration_estimate
@@ -112,7 +112,8 @@ class Tracker:
         # colour only: the two planar poses tracked until the motion decides (tracking/hypotheses)
         self._flip: hypotheses.PlanarHypotheses | None = None
         self._camera_state: tuple = (None, None)  # the last track's (x, P), for its depth offset
-        self.warnings: list[str] = []  # what the run must say about its poses (summary.json)
+        # what the run must say about its poses (summary.json)
+        self.warnings: list[str] = unmodelled_timing(self.config.model, self.camera.readout)
         self.depth_timing = DepthTiming(self.camera.depth_delay)  # each frame's depth delay
 
     def __getstate__(self) -> dict:
