@@ -34,7 +34,7 @@ def rolled(tmp_path_factory):
 
 
 def test_the_readout_is_measured_and_written(rolled, capsys):
-    """Within 1 ms of the rendered 18.8 ms (18.6 when written), into --camera's file. The
+    """Within 1 ms of the rendered 18.8 ms (18.5 when written), into --camera's file. The
     reach moves the hand bodily: a depth delay would move its markers' depths alike (0.27 mm
     apart at 17 ms, their noise 1.3), which reads as a hand a little nearer, so the depth's
     delay is not measured, and not written."""

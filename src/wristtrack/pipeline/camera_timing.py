@@ -21,19 +21,24 @@ rates through the tracker's own models: ``observation.rolling_shift``,
 and the command says so:
 
 - readout, at a whole frame interval: 0.36-0.77 px on rendered reaches (1.2-2.6 of the
-  model's 0.3 px), 0.17-0.18 px (0.6) on the robustness movement, with or without every other
-  effect, and 0.04 px (0.12) on a fast pronation, whose markers turn in depth, hardly across
-  the image: a parabola through its flat curve put a global shutter's readout at 5.6-6.9 ms;
-- depth delay, at half a frame interval: 0.6-0.66 of the depth sigma on the robustness
-  movement, 1.5 on a pronation (measured within 0.3 ms), and 0.10-0.21 on reaches, whose hand
+  model's 0.3 px), 0.18 px (0.6) on the robustness movement, with or without every other
+  effect, and 0.02-0.04 px (0.06-0.12) on a fast pronation, whose markers turn in depth,
+  hardly across the image: a parabola through its flat curve put a global shutter's readout
+  at 5.6-6.9 ms;
+- depth delay, at half a frame interval: 0.6 of the depth sigma on the robustness movement,
+  0.8-1.5 on a pronation (measured within 0.3 ms), and 0.11-0.19 on reaches, whose hand
   moves bodily: their minimum fell at the range's edge (-16.7 ms) for rendered delays of 0,
   -2.9 and -11.9 ms.
 
-Rendered recordings of the robustness movement (3 seeds): readouts 17.3, 22.7, 18.7 ms gave
-16.4, 22.6, 18.0 ms, and with every other effect too (whose errors flatten the curve to a 2-4 %
-dip) 14.3, 24.0, 17.5 ms; depth delays -2.9, -11.9, 12.8 ms gave -3.4, -11.3, 12.6 ms, and
-with every effect -2.4, -9.8, 12.2 ms. A hand held still explains every value alike, and the
-command says so instead of guessing.
+The frames are ranked by the markers' image speed as the filter's pixel noise takes it
+(``pixel_noise.image_speed2``). Rendered recordings of the robustness movement (3 seeds):
+readouts 17.3, 22.7, 18.7 ms gave 16.6, 22.7, 18.1 ms, and with every other effect too (whose
+errors flatten the curve to a 2-4 % dip) 16.8, 22.5, 19.7 ms; depth delays -2.9, -11.9,
+12.8 ms gave -3.4, -11.2, 12.5 ms, and with every effect -3.4, -11.8, 12.6 ms. With neither
+stated (every effect; the readout first, the delay through it, as the command runs) 16.9,
+22.3, 18.0 ms and -3.4, -11.8, 12.5 ms: the delay left unknown costs the readout nothing
+here, and a second round of both did not improve them. A hand held still explains every
+value alike, and the command says so instead of guessing.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ from wristtrack.tracking.observation import (
     point_rates,
     rolling_shift,
 )
+from wristtrack.tracking.pixel_noise import image_speed2
 from wristtrack.tracking.results import FrameResult
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
@@ -67,7 +73,6 @@ MIN_CONTRAST = 0.01
 # (0.58; the module's doc). Ranked by this instead of by speed, the frames told less under
 # every effect at once (readouts 4.3, 4.8, 2.1 ms off against 3.0, 1.3, 1.2).
 MIN_EFFECT = 0.35
-ARM_M = 0.05  # the markers' typical distance from the hand's origin, for their image speed
 
 
 @dataclass(frozen=True)
@@ -131,7 +136,9 @@ def _search(recording: Recording, detections: list[Detections], camera: Camera,
 
     mid = len(values) // 2
     points, middle = track(values[mid])  # the frames are ranked, and judged, as it tracked them
-    speeds = np.array([_image_speed(r, camera.fx) if r.nis_dof else np.nan for r in middle])
+    r2 = float(np.mean(np.sum(points**2, axis=1))) if len(points) else 0.0
+    speeds = np.array([image_speed2(r.v, r.w, float(r.t_ch[2]), camera.fx, r2)
+                       if r.nis_dof else np.nan for r in middle])
     if np.count_nonzero(np.isfinite(speeds)) < 10:
         raise InputError(f"{recording.source}: the hand was tracked in too few frames to measure "
                          f"{field.name}; {field.advice}")
@@ -161,13 +168,6 @@ def _search(recording: Recording, detections: list[Detections], camera: Camera,
             value += float(np.clip(0.5 * step * (a - c) / (a - 2 * b + c), -step / 2, step / 2))
     return TimingEstimate(field.name, value, tuple(float(v) for v in values), tuple(nis),
                           int(fast.sum()))
-
-
-def _image_speed(result: FrameResult, fx: float) -> float:
-    """The markers' image speed (px/s), roughly: the hand's speed and its turning at ARM_M
-    from its origin, seen at its depth."""
-    moving = float(np.linalg.norm(result.v)) + ARM_M * float(np.linalg.norm(result.w))
-    return fx * moving / float(result.t_ch[2])
 
 
 def _markers(points: np.ndarray, result: FrameResult) -> tuple[np.ndarray, np.ndarray]:
