@@ -82,6 +82,36 @@ def test_skin_model_follows_the_brightness_of_the_skin():
     assert np.all(np.abs(back[0] - mean) < 4.0), back
 
 
+def test_the_luma_scaled_table_is_the_model_evaluated_at_each_luma():
+    """The table, built for every luma at once, against its definition evaluated one luma at a
+    time: a bin is skin where the chroma bin's centre lies within the threshold of the model
+    scaled to any of the bin's sampled lumas (mean 128 + (mean - 128) Y/Y0, covariance
+    (cov - floor^2) (Y/Y0)^2 + floor^2), and none below y_min."""
+    from wristtrack.detect import skin
+
+    rng = np.random.default_rng(5)
+    centres = (np.arange(skin.C_BINS) + 0.5) * 256 / skin.C_BINS
+    width = 256 / skin.Y_BINS
+    for _ in range(5):
+        mean = np.array([150.0, 110.0]) + rng.normal(0, 10, 2)
+        a = rng.normal(0, 4, (2, 2))
+        cov, luma, floor, y_min = a @ a.T + 4 * np.eye(2), rng.uniform(60, 200), 2.0, 40
+        table = mahalanobis_skin_lut(mean, cov, 3.5, y_min, luma, floor)
+        expected = np.zeros_like(table, dtype=bool)
+        for b in range(skin.Y_BINS):
+            if (b + 0.5) * width < y_min:
+                continue
+            for y in b * width + (np.arange(skin._Y_SUBSAMPLES) + 0.5) * width / skin._Y_SUBSAMPLES:
+                s = y / luma
+                m = 128.0 + (mean - 128.0) * s
+                inv = np.linalg.inv((cov - floor**2 * np.eye(2)) * s * s + floor**2 * np.eye(2))
+                for i, cr in enumerate(centres):
+                    d = np.column_stack((np.full(skin.C_BINS, cr), centres)) - m
+                    expected[b, i] |= np.sum(d @ inv * d, axis=1) <= 3.5**2
+        np.testing.assert_array_equal(table > 0, expected)
+        assert expected.any() and not expected.all()
+
+
 def test_adaptation_follows_a_white_balance_drift():
     """After a slow drift of the light's colour, adapting from labelled markers raises the
     blobs' similarity to the learned reference (and the detector still finds every marker)."""
