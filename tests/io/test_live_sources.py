@@ -277,8 +277,9 @@ def test_track_live_plays_a_realsense_recording_as_a_camera(reach, realsense_fil
     SDK's real-time playback or the newest-frame rule), and the frames after a drop are filtered
     with a longer step. So the live rows are compared with an offline run over exactly the
     frames the live run took (the folder cut to them, without hand.json, as in the SDK file),
-    however many were dropped. They agree within the filter's noise, not digit for digit: live,
-    the colours are learnt in a thread and handed over a frame or two later (live/loop.py)."""
+    however many were dropped. They agree within the filter's noise, not digit for digit: the
+    cut folder numbers its frames afresh, so its colours adapt on other frames (every 10th,
+    pipeline/colours.py)."""
     assert main(["track", "--live", f"realsense:{realsense_file}", "--out",
                  str(tmp_path / "live"), "--no-report"]) == 0
     live = read_poses(tmp_path / "live" / "poses.csv")

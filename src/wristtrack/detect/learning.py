@@ -47,15 +47,6 @@ class MarkerLearning:
         self.skin.learn(bgr, skin)
         self._mean_colours(bgr, marker, skin, 1.0)
 
-    def take_learned(self, other: MarkerLearning) -> None:
-        """Use what ``other`` (a detector of the same camera) learned: the marker and skin
-        models, their mean colours (what a blurred or shaded marker's pixels lie between,
-        detect/streaks.py) and how many markers it learned from. The live loop learns in a
-        detector of its own, in a thread, and hands the result over between frames."""
-        self.colour, self.skin = other.colour, other.skin
-        self.marker_bgr, self.skin_bgr = other.marker_bgr, other.skin_bgr
-        self.learned_count = other.learned_count
-
     def adapt(self, bgr: np.ndarray, uv: np.ndarray) -> bool:
         """Follow a slow change of the marker and skin colours from confidently labelled markers.
 

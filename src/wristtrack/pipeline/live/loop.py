@@ -11,11 +11,9 @@ Ctrl-C (or SIGTERM) ends the session at the end of the current frame: the output
 complete, as when the source ends by itself. Live tracking is causal: smooth a ``--record``
 copy of the session offline.
 
-Two detector refinements cost more than a frame period at 30 fps (~40-60 ms each): the colour
-learning at the first fix runs in a thread (:class:`BackgroundLearning`); the offline loop's
-slow colour adaptation (every 10th confidently tracked frame, following a drift of the light)
-is not run live, so a session keeps the colours learnt at its first fix. Offline re-tracking of
-a ``--record`` copy gets both.
+The detector's colours are learnt at the first fix and then follow the light every 10th
+confidently tracked frame, as offline (pipeline/colours.py), between frames: 6-10 ms each on
+a shared 2-core server (learning 7-8 ms), a third of a frame period at 30 fps.
 
 Without hand.json the session is tracked with the still start's layout (a camera cannot be read
 twice), and the layout surveyed over the session (tracking/layout_survey.py) is written as
@@ -41,13 +39,13 @@ from wristtrack.io.base import Frame, Recording
 from wristtrack.io.live.record import LiveRecorder
 from wristtrack.io.poses import PosesWriter
 from wristtrack.io.run_folder import SURVEYED_HAND
-from wristtrack.pipeline.colours import learn_colours
+from wristtrack.pipeline.colours import follow_colours
 from wristtrack.pipeline.frame_step import came_without_depth, skipped_row
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.track import no_initialisation_message, settings_dict
 from wristtrack.tracking import compiled
 from wristtrack.tracking.layout_survey import RunSurvey
-from wristtrack.tracking.tracker import Status, Tracker, TrackerConfig
+from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 LIVE_JSON = "live.json"
 DROPPED = "dropped"  # poses.csv status of a frame the tracker had no time for
@@ -208,36 +206,6 @@ class LiveLog:
         }
 
 
-class BackgroundLearning(threading.Thread):
-    """The detector's one-off colour learning from the first fix's six markers, in a thread.
-
-    Offline it runs inside the first tracked frame; it takes ~50 ms, more than a frame period
-    at 30 fps, so live it would drop frames. Here a fresh detector (the live one has learned
-    nothing yet either) learns from that frame while the next frames are tracked with the
-    default colour models, and :meth:`apply_to` hands the learned models over between frames.
-    """
-
-    def __init__(self, camera, bgr: np.ndarray, det, result) -> None:
-        super().__init__(name="wristtrack-learn", daemon=True)
-        self._learning = MarkerDetector(camera)
-        self._args = (bgr, det, result)
-        self.applied = False
-        self.start()
-
-    def run(self) -> None:
-        try:
-            learn_colours(self._learning, *self._args)
-        except Exception:  # any failure: half-learned models must not be handed over
-            self._learning = None  # a refinement that cannot be made must not stop a session
-
-    def apply_to(self, detector: MarkerDetector) -> None:
-        if self.applied or self.is_alive():
-            return
-        self.applied = True
-        if self._learning is not None:
-            detector.take_learned(self._learning)
-
-
 def track_live(
     source: Recording,
     out: str | Path,
@@ -273,7 +241,7 @@ def track_live(
     survey = RunSurvey() if source.hand is None else None
     summary = SummaryAccumulator()
     log = LiveLog()
-    learner: BackgroundLearning | None = None
+    learned = False  # the detector's colours, from the first fix on
     skipped: list[dict[str, Any]] = []  # unusable frames, for summary.json (drops: live.json)
     recorder = LiveRecorder(record, camera, source.hand) if record is not None else None
     slot = NewestFrameSlot()
@@ -322,10 +290,7 @@ def track_live(
                 summary.add(result)
                 if survey is not None:
                     survey.add(tracker, det, result)
-                if learner is None and result.status == Status.TRACKING:
-                    learner = BackgroundLearning(camera, frame.bgr, det, result)
-                elif learner is not None:
-                    learner.apply_to(detector)
+                learned = follow_colours(detector, frame.bgr, det, result, frame.index, learned)
                 if view is not None:
                     view.publish(frame.bgr, det, result, log.stats())
                 if overlay is not None:
