@@ -266,7 +266,7 @@ def read_patches(camera: Camera, surface: DorsumSurface, R_ch: np.ndarray, t_ch:
                                                              axis=1)), axis=1)
     rows = np.arange(len(n))
     mean = (csum[rows, hi] - csum[rows, lo]) / (hi - lo)
-    centre = np.concatenate((camera.normalize(uv[read]), np.ones((len(n), 1))), axis=1)
+    centre = P[read] / P[read, 2:]  # the ray through each disc's centre (no undistorting back)
     measured = plane_depths(P[read], N[read], centre) + mean
     return PatchReading(index[read], centre, measured, P[read], N[read],
                         centre_px[read], r_px[read])
