@@ -42,20 +42,20 @@ def offline(reach, tmp_path_factory):
 
 
 def _agree(live, reach, cut_recording, tmp_path, deg, mm):
-    """Poses of the frames the live run processed against an offline run over exactly those
-    frames (the folder cut to them), in the camera frame: a dropped frame gives the frames after
-    it a longer filter step, which the offline run over the same frames takes too, however many
-    a busy machine dropped. Not digit for digit: the cut folder numbers its frames afresh, so
-    its colours adapt on other frames than the live run's (every 10th, pipeline/colours.py),
-    which moves the blobs' centres by a fraction of a pixel; on sharp blobs the out-of-plane angles rest on that fraction, which
-    acts as a measurement noise of their own on each run. So a frame's two orientations agree
-    within ``deg`` or, where larger, three times the spread of the difference of two estimates
-    each with the reported 1-sigma uncertainty, 3 sqrt(2) sigma (the reach's frames 61-67: up to
-    0.65 deg apart at 0.56 reported on a loaded machine that dropped frames, 0.43 at 0.67 on an
-    idle one, each run within 0.3 deg of the truth there), and their positions within ``mm`` or,
-    where larger, 3 sqrt(2) times the reported position sigma. A run that kept 4 of 60 frames,
-    each after a gap that leaves it to its own blobs, had two of them 1.57 mm apart at 1.02 mm
-    reported: 1.1 sigma of the difference, as expected of two draws of the blobs' noise; a bound
+    """Poses of the frames the live run processed against an offline run over exactly those frames
+    (the folder cut to them), in the camera frame: a dropped frame gives the frames after it a
+    longer filter step, which the offline run over the same frames takes too, however many a busy
+    machine dropped. Not digit for digit: the cut folder numbers its frames afresh, so its colours
+    adapt on other frames than the live run's (every 10th, pipeline/colours.py), which moves the
+    blobs' centres by a fraction of a pixel; on sharp blobs the out-of-plane angles rest on that
+    fraction, which acts as a measurement noise of their own on each run. So a frame's two
+    orientations agree within ``deg`` or, where larger, three times the spread of the difference of
+    two estimates each with the reported 1-sigma uncertainty, 3 sqrt(2) sigma (the reach's frames
+    61-67: up to 0.65 deg apart at 0.56 reported on a loaded machine that dropped frames, 0.43 at
+    0.67 on an idle one, each run within 0.3 deg of the truth there), and their positions within
+    ``mm`` or, where larger, 3 sqrt(2) times the reported position sigma. A run that kept 4 of 60
+    frames, each after a gap that leaves it to its own blobs, had two of them 1.57 mm apart at 1.02
+    mm reported: 1.1 sigma of the difference, as expected of two draws of the blobs' noise; a bound
     at one sigma of the difference fails such a run a third of the time."""
     taken = live["status"] != "dropped"
     cut = cut_recording(reach, np.asarray(live["frame"][taken], int), tmp_path / "taken")
