@@ -59,7 +59,7 @@ from wristtrack.tracking.observation import (
     point_rates,
     rolling_shift,
 )
-from wristtrack.tracking.pixel_noise import image_speed2
+from wristtrack.tracking.pixel_noise import image_speed2, mean_square_radius
 from wristtrack.tracking.results import FrameResult
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
@@ -136,7 +136,7 @@ def _search(recording: Recording, detections: list[Detections], camera: Camera,
 
     mid = len(values) // 2
     points, middle = track(values[mid])  # the frames are ranked, and judged, as it tracked them
-    r2 = float(np.mean(np.sum(points**2, axis=1))) if len(points) else 0.0
+    r2 = mean_square_radius(points)
     speeds = np.array([image_speed2(r.v, r.w, float(r.t_ch[2]), camera.fx, r2)
                        if r.nis_dof else np.nan for r in middle])
     if np.count_nonzero(np.isfinite(speeds)) < 10:

@@ -25,6 +25,7 @@ from wristtrack.depth_noise import (
     oblique_sigma,
 )
 from wristtrack.hand import MARKER_NAMES
+from wristtrack.tracking import pixel_noise
 
 # Skin over the metacarpal heads slides as the fingers flex, about 3 mm distally and 1 mm
 # towards the palm over the full range (see sim.realism); WRIST and CMC1 sit over bone that does
@@ -135,7 +136,7 @@ class MarkerObservation:
         self.n_markers = self.layout_T.shape[1]
         # the markers' mean squared distance from the hand's origin (m^2): their image speed
         # per turning rate (pixel_noise.image_speed2), fixed with the layout
-        self.layout_r2 = float(np.mean(np.sum(self.layout_T**2, axis=0)))
+        self.layout_r2 = pixel_noise.mean_square_radius(self.layout_T.T)
         self.R_c0 = np.asarray(R_c0, dtype=float)
         self.t_c0 = np.asarray(t_c0, dtype=float)
         self.pose = pose

@@ -302,10 +302,17 @@ def prior_inflation(window_frames: float | None) -> float | None:
     return None if window_frames is None else math.sqrt(window_frames)
 
 
+def mean_square_radius(points: np.ndarray) -> float:
+    """The markers' mean squared distance (m^2) from the hand's origin, of a layout's
+    ``points`` (K, 3): what :func:`image_speed2` takes as ``r2``; 0 for no points."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    return float(np.mean(np.sum(points**2, axis=1))) if len(points) else 0.0
+
+
 def image_speed2(v: np.ndarray, w: np.ndarray, z: float, fx: float, r2: float) -> float:
     """The markers' squared image speed (px/s)^2 of a hand moving at ``v`` (m/s) and turning at
     ``w`` (rad/s) at depth ``z`` (m): (fx / z)^2 (|v|^2 + |w|^2 r^2), ``r2`` the markers' mean
-    squared distance from the hand's origin (m^2, MarkerObservation.layout_r2). A bound on the
+    squared distance from the hand's origin (m^2, :func:`mean_square_radius`). A bound on the
     motion across the line of sight, from the state alone (no projection: a frame costs ~1 us);
     0 where the state has no speed (NaN, the paper's model)."""
     speed2 = (fx / z) ** 2 * (float(v @ v) + float(w @ w) * r2)
