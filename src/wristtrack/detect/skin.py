@@ -78,29 +78,35 @@ def mahalanobis_skin_lut(
     and covariance (cov - floor^2 I)(Y/Y0)^2 + floor^2 I (``floor``: the noise part, in levels,
     that does not scale), evaluated at a few lumas across each bin.
     """
-    c = _bin_centres(C_BINS)
-    mean = np.asarray(mean, float)
+    mean, cov = np.asarray(mean, float), np.asarray(cov, float)
     gate = _y_gate(y_min)
     if luma is None:
-        d = np.stack(np.meshgrid(c, c, indexing="ij"), -1) - mean  # (C, C, 2)
-        d2 = np.einsum("...i,ij,...j->...", d, np.linalg.inv(cov), d)
+        d2 = _chroma_distance2(mean, cov, 0.0, np.ones(1))[0]
         lut = gate[:, None, None] & (d2 <= threshold * threshold)[None]
         return lut.astype(np.float32) * 255.0
     # Every gated bin's lumas at once: the table is made again each time the skin model adapts
     # (every tenth frame or so), and bin by bin that cost 16-18 ms, 8x a frame's detection.
     width = 256 / Y_BINS
     bins = np.flatnonzero(gate)
-    y = (bins[:, None] * width + (np.arange(_Y_SUBSAMPLES) + 0.5) * width / _Y_SUBSAMPLES)
-    s = (y / luma).reshape(-1, 1, 1)  # (B * sub, 1, 1)
-    cov_s = (np.asarray(cov, float) - np.eye(2) * floor**2) * (s * s) + np.eye(2) * floor**2
-    inv = np.linalg.inv(cov_s)  # (B * sub, 2, 2), then its quadratic form written out:
-    d0 = c[None, :, None] - (128.0 + (mean[0] - 128.0) * s)  # Cr along the table's axis 1
-    d1 = c[None, None, :] - (128.0 + (mean[1] - 128.0) * s)  # Cb along axis 2
-    d2 = inv[:, :1, :1] * d0 * d0 + 2 * inv[:, :1, 1:] * d0 * d1 + inv[:, 1:, 1:] * d1 * d1
+    y = bins[:, None] * width + (np.arange(_Y_SUBSAMPLES) + 0.5) * width / _Y_SUBSAMPLES
+    d2 = _chroma_distance2(mean, cov, floor, (y / luma).reshape(-1))
     lut = np.zeros((Y_BINS, C_BINS, C_BINS), bool)
     lut[bins] = (d2 <= threshold * threshold).reshape(len(bins), _Y_SUBSAMPLES, C_BINS,
                                                       C_BINS).any(axis=1)
     return lut.astype(np.float32) * 255.0
+
+
+def _chroma_distance2(mean: np.ndarray, cov: np.ndarray, floor: float,
+                      scales: np.ndarray) -> np.ndarray:
+    """(K, C_BINS, C_BINS) squared Mahalanobis distance of each (Cr, Cb) bin centre from the
+    chroma Gaussian (``mean``, ``cov``) scaled to each luma ratio of ``scales`` (K,): mean
+    128 + (mean - 128) s, covariance (cov - floor^2 I) s^2 + floor^2 I (mahalanobis_skin_lut)."""
+    c = _bin_centres(C_BINS)
+    s = scales.reshape(-1, 1, 1)
+    inv = np.linalg.inv((cov - np.eye(2) * floor**2) * (s * s) + np.eye(2) * floor**2)
+    d0 = c[None, :, None] - (128.0 + (mean[0] - 128.0) * s)  # Cr along the table's axis 1
+    d1 = c[None, None, :] - (128.0 + (mean[1] - 128.0) * s)  # Cb along axis 2
+    return inv[:, :1, :1] * d0 * d0 + 2 * inv[:, :1, 1:] * d0 * d1 + inv[:, 1:, 1:] * d1 * d1
 
 
 def normalised_chroma(ycc: np.ndarray, luma: float) -> np.ndarray:
