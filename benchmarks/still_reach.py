@@ -8,7 +8,9 @@ most, alone and combined: a 1/30 s shutter smears the reach's blobs only after i
 frames have shown no blur, and structured-light depth carries the out-of-plane angles where the
 blobs lose their weight. The range-of-motion error is split between the axis that turns
 (flexion) and the two that do not (deviation, pronation): on those, all of the estimated range
-is error.
+is error. Under every effect combined, the default tracker also runs on the blobs with one
+source of error taken away (benchmarks/error_budget.py's ``corrected``): where the still axes'
+error comes from.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, range_errors, recorded_detections, score
+from benchmarks.error_budget import corrected
+from benchmarks.robustness import _truth_markers
 from wristtrack.sim.realism import PRESET_REAL
 from wristtrack.sim.render import render_recording
 
@@ -35,6 +39,14 @@ TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURA
 }
 TURNING, STILL = 1, (0, 2)  # wrist_angles' axes: flexion turns, deviation and pronation do not
 COMBINED = "all (preset real)"
+# Under COMBINED: the default tracker and its smoother on the blobs with one source of error
+# taken away (error_budget.BUDGET_DATA), table label -> (data, row of ACCURACY_ROWS)
+BUDGET: dict[str, tuple[str, str]] = {
+    f"{label}, {data}": (data, row)
+    for data in ("pixels exact", "depth exact", "pixels and depth exact")
+    for label, row in (("default", DEFAULT),
+                       ("default, smoothed (offline)", "default + smoother (offline)"))
+}
 # the issue's range-of-motion targets for every effect combined (deg): tracker -> (name, target)
 TARGETS = {"default": ("filtered", 1.0), "default, smoothed (offline)": ("smoothed", 0.7)}
 
@@ -49,15 +61,18 @@ def axis_errors(results: list, truth) -> tuple[float, float]:
 def still_reach(cache: Path, seeds: tuple[int, ...]) -> dict[str, dict[str, dict[str, float]]]:
     """condition -> tracker -> metrics (mean over ``seeds``): rot, pos, turning, still, cover."""
     per: dict[str, dict[str, list[dict[str, float]]]] = {
-        c: {label: [] for label in TRACKERS} for c in CONDITIONS}
+        c: {label: [] for label in _runs(c)} for c in CONDITIONS}
     for condition, effects in CONDITIONS.items():
         slug = "".join(ch if ch.isalnum() else "_" for ch in condition)
         for seed in seeds:
             folder = render_recording(cache / f"still-reach-{slug}-{seed}", SCENARIO, seed=seed,
                                       overwrite=True, effects=effects)
             camera, hand, detections, truth = recorded_detections(folder)
-            for label, row in TRACKERS.items():
-                results = ACCURACY_ROWS[row].run(camera, hand, detections)
+            uv = _truth_markers(folder)[0] if condition == COMBINED else None
+            for label, (data, row) in _runs(condition).items():
+                blobs = detections if data is None else corrected(
+                    detections, truth, hand, uv, data, np.random.default_rng(seed), camera.fx)
+                results = ACCURACY_ROWS[row].run(camera, hand, blobs)
                 m = score(results, truth)
                 turning, still = axis_errors(results, truth)
                 per[condition][label].append({"rot": m["rot"], "pos": m["pos"],
@@ -65,6 +80,31 @@ def still_reach(cache: Path, seeds: tuple[int, ...]) -> dict[str, dict[str, dict
                                               "cover": m["cover"]})
     return {c: {label: {k: float(np.nanmean([m[k] for m in ms])) for k in ms[0]}
                 for label, ms in rows.items()} for c, rows in per.items()}
+
+
+def _runs(condition: str) -> dict[str, tuple[str | None, str]]:
+    """The table's rows for ``condition``: label -> (the data's correction or None for the
+    blobs as detected, row of ACCURACY_ROWS)."""
+    runs: dict[str, tuple[str | None, str]] = {
+        label: (None, row) for label, row in TRACKERS.items()}
+    return {**runs, **BUDGET} if condition == COMBINED else runs
+
+
+def budget_lines(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
+    """What the still axes' error under every effect is made of: the default tracker's still
+    axes with exact pixels and with exact depth, against the blobs as detected."""
+    rows = acc.get(COMBINED, {})
+    out = []
+    for label in TARGETS:
+        if label not in rows or f"{label}, pixels exact" not in rows:
+            continue
+        got = {data: rows[f"{label}, {data}"]["still"]
+               for data in ("pixels exact", "depth exact", "pixels and depth exact")}
+        out.append(f"- Every effect, {label}: still axes {rows[label]['still']:.2f} deg as "
+                   f"detected; {got['pixels exact']:.2f} with exact pixels, "
+                   f"{got['depth exact']:.2f} with exact depth, "
+                   f"{got['pixels and depth exact']:.2f} with both.")
+    return out
 
 
 def summary_lines(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
@@ -107,6 +147,12 @@ def still_reach_section(cache: Path, seeds: tuple[int, ...]) -> tuple[list[str],
         "shutter 1.12 / 0.75, structured light 1.42 / 0.86, every effect 2.14 / 1.58).",
         "",
         *lines,
+        "",
+        "Rows 'pixels exact', 'depth exact': the blobs that are markers moved to their true "
+        "image positions, or given their true depths (the 'Where the error comes from' "
+        "section's corrections).",
+        "",
+        *budget_lines(acc),
     ]
     summary = summary_lines(acc)
     return summary, [*section, "", *summary]

@@ -5,7 +5,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from benchmarks.still_reach import COMBINED, axis_errors, summary_lines
+from benchmarks.still_reach import (
+    BUDGET,
+    COMBINED,
+    TRACKERS,
+    _runs,
+    axis_errors,
+    budget_lines,
+    summary_lines,
+)
 from wristtrack.geometry import matrix_from_wrist_angles
 
 
@@ -41,3 +49,22 @@ def test_summary_says_whether_the_still_axes_meet_the_targets():
     assert "**not met**" in summary_lines(acc(0.9, 0.8))[0]  # smoothed above 0.7
     assert "**not met**" in summary_lines(acc(2.05, 0.6))[0]
     assert summary_lines({}) == []
+
+
+def test_the_error_budget_rows_run_under_every_effect_only():
+    """The corrected blobs' rows join the combined condition's; the others keep the trackers."""
+    assert set(_runs("clean")) == set(TRACKERS)
+    assert set(_runs(COMBINED)) == set(TRACKERS) | set(BUDGET)
+    assert {data for data, _ in BUDGET.values()} == {
+        "pixels exact", "depth exact", "pixels and depth exact"}
+    assert all(_runs(COMBINED)[label][0] is None for label in TRACKERS)
+
+
+def test_budget_lines_set_each_correction_beside_the_blobs_as_detected():
+    rows = {"default": {"still": 2.1}, "default, pixels exact": {"still": 1.0},
+            "default, depth exact": {"still": 1.6},
+            "default, pixels and depth exact": {"still": 0.9}}
+    (line,) = budget_lines({COMBINED: rows})
+    assert line == ("- Every effect, default: still axes 2.10 deg as detected; 1.00 with exact "
+                    "pixels, 1.60 with exact depth, 0.90 with both.")
+    assert budget_lines({COMBINED: {"default": {"still": 2.1}}}) == []
