@@ -39,16 +39,13 @@ TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURA
 }
 TURNING, STILL = 1, (0, 2)  # wrist_angles' axes: flexion turns, deviation and pronation do not
 COMBINED = "all (preset real)"
-# Under COMBINED: the default tracker and its smoother on the blobs with one source of error
-# taken away (error_budget.BUDGET_DATA), table label -> (data, row of ACCURACY_ROWS)
-BUDGET: dict[str, tuple[str, str]] = {
-    f"{label}, {data}": (data, row)
-    for data in ("pixels exact", "depth exact", "pixels and depth exact")
-    for label, row in (("default", DEFAULT),
-                       ("default, smoothed (offline)", "default + smoother (offline)"))
-}
 # the issue's range-of-motion targets for every effect combined (deg): tracker -> (name, target)
 TARGETS = {"default": ("filtered", 1.0), "default, smoothed (offline)": ("smoothed", 0.7)}
+# Under COMBINED: the targets' trackers on the blobs with one source of error taken away (of
+# error_budget.BUDGET_DATA), table label -> (data, row of ACCURACY_ROWS)
+CORRECTIONS = ("pixels exact", "depth exact", "pixels and depth exact")
+BUDGET: dict[str, tuple[str, str]] = {
+    f"{label}, {data}": (data, TRACKERS[label]) for data in CORRECTIONS for label in TARGETS}
 
 
 def axis_errors(results: list, truth) -> tuple[float, float]:
@@ -98,8 +95,7 @@ def budget_lines(acc: dict[str, dict[str, dict[str, float]]]) -> list[str]:
     for label in TARGETS:
         if label not in rows or f"{label}, pixels exact" not in rows:
             continue
-        got = {data: rows[f"{label}, {data}"]["still"]
-               for data in ("pixels exact", "depth exact", "pixels and depth exact")}
+        got = {data: rows[f"{label}, {data}"]["still"] for data in CORRECTIONS}
         out.append(f"- Every effect, {label}: still axes {rows[label]['still']:.2f} deg as "
                    f"detected; {got['pixels exact']:.2f} with exact pixels, "
                    f"{got['depth exact']:.2f} with exact depth, "
