@@ -54,15 +54,27 @@ def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list
     (TrackerConfig.prime_noise). The last pass's tracker and results."""
     config = TrackerConfig() if config is None else config
     if layout is None:
-        survey = RunSurvey()
-        tracker = Tracker(camera, layout, config)
-        results = []
-        for d in detections:
-            results.append(tracker.step(d))
-            survey.add(tracker, d, results[-1])
-        layout = survey.surveyed_layout()
+        tracker, results, layout = _survey(camera, detections, config)
         if layout is None:  # nothing surveyed: the first pass is the run
             return tracker, results
+    return _tracking_pass(camera, layout, detections, config)
+
+
+def _survey(camera: Camera, detections: list[Detections], config: TrackerConfig):
+    """The first pass without a layout: its tracker, results and the layout it surveyed (None:
+    nothing)."""
+    survey = RunSurvey()
+    tracker = Tracker(camera, None, config)
+    results = []
+    for d in detections:
+        results.append(tracker.step(d))
+        survey.add(tracker, d, results[-1])
+    return tracker, results, survey.surveyed_layout()
+
+
+def _tracking_pass(camera: Camera, layout: HandLayout | None, detections: list[Detections],
+                   config: TrackerConfig) -> tuple[Tracker, list[FrameResult]]:
+    """One pass that tracks with ``layout`` (None: the still start's), primed."""
     tracker = Tracker(camera, layout, config)
     if config.primes_noise and detections:
         first = Tracker(camera, layout, config)
@@ -81,11 +93,27 @@ def _default(camera: Camera, layout: HandLayout | None, detections: list[Detecti
 def _smoothed(camera: Camera, layout: HandLayout | None, detections: list[Detections],
               config: TrackerConfig | None = None):
     """The default tracker (or one of ``config``), then the offline unscented RTS smoother over
-    its results."""
+    its results; with the learned smoothing noise (the default), tracked again at the angular
+    process noise those smoothed rates show and smoothed, as ``track --smooth`` does
+    (pipeline/refit.py; the refit tracks with the first run's layout, surveyed or given)."""
     from wristtrack.tracking.smoothed_results import smooth_results
+    from wristtrack.tracking.smoother_noise import keeps_refit, refits, results_angular_accel
 
-    tracker, results = _default_tracker(camera, layout, detections, config)
-    return smooth_results(tracker.model, results, tracker.config.ukf, tracker.config.coast_limit)
+    config = TrackerConfig() if config is None else config
+    surveyed = None
+    if layout is None:
+        tracker, results, surveyed = _survey(camera, detections, config)
+    if layout is not None or surveyed is not None:
+        tracker, results = _tracking_pass(camera, layout or surveyed, detections, config)
+    first = smooth_results(tracker.model, results, config.ukf, config.coast_limit)
+    q = results_angular_accel(first, config.process.angular_accel) if refits(config) else None
+    if q is None:
+        return first
+    again = replace(config, process=replace(config.process, angular_accel=q))
+    tracker, results = _tracking_pass(camera, layout or surveyed, detections, again)
+    refit = smooth_results(tracker.model, results, again.ukf, again.coast_limit)
+    tracked = [sum(r.has_estimate for r in run) for run in (first, refit)]
+    return refit if keeps_refit(*tracked) else first
 
 
 def _slide_as_noise(camera: Camera, layout: HandLayout | None, detections: list[Detections]):

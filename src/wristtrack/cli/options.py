@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from wristtrack.filter.associate import METHODS
+from wristtrack.tracking.config import SMOOTHING_NOISE
 from wristtrack.tracking.models import MODELS
 
 
@@ -63,7 +64,8 @@ def non_negative_float(text: str) -> float:
 
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
     """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide,
-    --[no-]follow-offset, --fixed-noise, --[no-]prime-noise and --coast-limit, read back by
+    --[no-]follow-offset, --fixed-noise, --[no-]prime-noise, --smooth-noise and --coast-limit,
+    read back by
     :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
@@ -96,6 +98,12 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
              "--no-prime-noise learns from the first frame on offline too, as a live run "
              "does")
     parser.add_argument(
+        "--smooth-noise", choices=SMOOTHING_NOISE, default="learned",
+        help="with smoothing: track the recording once more at the angular process noise its "
+             "smoothed rates show and smooth that run (learned, the default: a steadier "
+             "smoothed orientation, one more pass), or smooth the run at the model's noise "
+             "(model)")
+    parser.add_argument(
         "--coast-limit", nargs=2, type=non_negative_float, metavar=("DEG", "MM"),
         default=None,
         help="a frame with too few markers reports the predicted pose only while that adds at "
@@ -117,6 +125,7 @@ def tracker_config(args: argparse.Namespace):
                          surface=None if args.no_skin_depth else SurfaceSettings(),
                          adapt_slide=not args.fixed_noise, adapt_pixel=not args.fixed_noise,
                          follow_slide=args.follow_slide, follow_offset=args.follow_offset,
-                         prime_noise=args.prime_noise, **limit)
+                         prime_noise=args.prime_noise, smoothing_noise=args.smooth_noise,
+                         **limit)
 
 

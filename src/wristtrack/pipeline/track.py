@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +32,7 @@ from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.frame_step import Rows, RunState, came_without_depth, track_frame
 from wristtrack.pipeline.interrupt import DeferredInterrupt
 from wristtrack.pipeline.priming import Priming
+from wristtrack.pipeline.refit import clear_refit, refit_begun, refit_run
 from wristtrack.pipeline.sinks import NoStates, progress_bar
 from wristtrack.pipeline.smoothing import smooth_run
 from wristtrack.pipeline.surveyed import (
@@ -42,6 +43,7 @@ from wristtrack.pipeline.surveyed import (
 )
 from wristtrack.tracking.layout_survey import RunSurvey
 from wristtrack.tracking.models import reads_camera_timing
+from wristtrack.tracking.smoother_noise import refits
 from wristtrack.tracking.tracker import Tracker, TrackerConfig
 
 if TYPE_CHECKING:
@@ -67,7 +69,9 @@ def track_recording(
     automatic labelling cannot; a ``label.ManualLabels`` (labels.json) names those of its own
     frame, matched by pixel position (until then the automatic labelling may initialise).
     ``smooth`` replaces the filtered poses by the unscented RTS smoother's once the run is
-    complete (the filtered ones stay in poses_filtered.csv).
+    complete (the filtered ones stay in poses_filtered.csv); with the default model, a recording
+    that can be read again is then tracked once more, and smoothed, at the angular process
+    noise its smoothed rates show (:mod:`wristtrack.pipeline.refit`).
     ``overlay`` (an overlay.OverlayWriter) receives every frame with its detections and
     estimate. ``detector`` names the marker detector's preset: "default" (ours) or "paper"
     (the paper's as published, :mod:`wristtrack.detect.paper`). Returns the summary.
@@ -83,7 +87,7 @@ def track_recording(
     checkpoint (see :mod:`wristtrack.pipeline.checkpoint`; also saved every
     ``checkpoint_every`` frames or 30 s, so a SIGKILL loses little), writes summary.json with
     ``"interrupted": true`` and raises KeyboardInterrupt. ``resume=True`` continues such a
-    run in ``out`` from its checkpoint, in either pass, with the same result as an
+    run in ``out`` from its checkpoint, in any pass, with the same result as an
     uninterrupted run.
     """
     detector_settings = detector_config(detector)  # an unknown name fails before any output
@@ -93,6 +97,31 @@ def track_recording(
                      detector_settings)
     surveyed = out / SURVEYED_HAND
     surveying = survey and recording.hand is None
+    # a smoothed run tracks once more at the motion noise it shows (pipeline/refit.py), where
+    # the recording can be read again
+    refitting = smooth and refits(config) and ckpt.input_identity(recording) is not None
+
+    def run_pass(pass_config: TrackerConfig, folder: Path, again: bool) -> dict[str, Any]:
+        one = replace(passes, config=pass_config, label="tracking at the learned noise")
+        if surveying and surveyed.exists():
+            with hand_of(recording, load_surveyed(surveyed)):
+                return one.run(recording, folder, None, again, surveyed=True)
+        return one.run(recording, folder, None, again)
+
+    if refitting and resume and refit_begun(out):  # the refit's turn
+        return refit_run(out, config, None, run_pass, resume=True) or ckpt.completed_summary(out)
+    if not resume:
+        clear_refit(out)
+    data = _passes(recording, out, passes, overlay, resume, surveyed, surveying)
+    if refitting:
+        return refit_run(out, config, data, run_pass, resume=False) or data
+    return data
+
+
+def _passes(recording: Recording, out: Path, passes: _Passes, overlay: Any, resume: bool,
+            surveyed: Path, surveying: bool) -> dict[str, Any]:
+    """The run's passes over ``recording``: with ``surveying``, a first that surveys the
+    layout (into ``surveyed``) and a second that tracks with it; else the one."""
     if surveying and resume and surveyed.exists():  # the second pass's turn
         with hand_of(recording, load_surveyed(surveyed)):
             return passes.run(recording, out, overlay, second_pass_begun(out), surveyed=True)
@@ -124,6 +153,7 @@ class _Passes:
     checkpoint_every: int
     detector: str
     detector_settings: DetectorConfig
+    label: str = "tracking"  # the progress bar's, but for a survey's
 
     def run(self, recording: Recording, out: Path, overlay: Any, resume: bool,
             survey: RunSurvey | None = None, surveyed: bool = False) -> dict[str, Any]:
@@ -149,7 +179,7 @@ class _Passes:
         prime = Priming(recording, self.config, self.detector_settings, labels,
                          self.progress) if primed else None
         bar = progress_bar(recording, self.progress,
-                           "surveying the hand" if survey else "tracking")
+                           "surveying the hand" if survey else self.label)
         bar.update(start)
         smooth = self.smooth  # a first pass too: it is the run if the survey finds nothing
         states = _state_writer(out, run.tracker, resume) if smooth else NoStates()

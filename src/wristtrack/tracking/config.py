@@ -13,6 +13,8 @@ from wristtrack.tracking.offset_model import DepthOffsetModel
 from wristtrack.tracking.slide_model import SlidingSkinModel
 from wristtrack.tracking.surface import SurfaceSettings
 
+SMOOTHING_NOISE = ("learned", "model")  # TrackerConfig.smoothing_noise
+
 
 @dataclass(frozen=True)
 class TrackerConfig:
@@ -45,6 +47,10 @@ class TrackerConfig:
     # out worse (10 rendered seeds: 0.95 -> 1.02 deg; tracking/offset_model.py).
     follow_offset: bool = False
     process: ProcessNoise = ProcessNoise()
+    # ``track --smooth``: "learned" tracks the recording once more at the angular process noise
+    # its smoothed rates show, then smooths that run (pipeline/refit.py,
+    # tracking/smoother_noise.py); "model": the run at ``process`` is smoothed as it is.
+    smoothing_noise: str = "learned"
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
     min_markers: int = 3  # fewer associated markers than this counts towards being lost
@@ -93,6 +99,9 @@ class TrackerConfig:
                 f"unknown association {self.association!r}; choose one of "
                 f"{', '.join(assoc.METHODS)}"
             )
+        if self.smoothing_noise not in SMOOTHING_NOISE:
+            raise ValueError(f"unknown smoothing noise {self.smoothing_noise!r}; choose one of "
+                             f"{', '.join(SMOOTHING_NOISE)}")
         if self.gap_iterations < 0:
             raise ValueError(f"gap_iterations must be 0 or more, got {self.gap_iterations}")
 

@@ -1,0 +1,85 @@
+"""The smoother's angular process noise, learned from the recording (``track --smooth``).
+
+The default model's angular acceleration density (ProcessNoise.angular_accel) is set for a
+filter that must follow any hand's fastest turn as it happens. Offline the whole recording is
+known, and its own motion is usually far calmer: on the rendered robustness recordings the
+rates of a first smoothed run put the density at 0.13-0.19 (rad/s^2)^2 s against the default's
+2.5, and the true rates at 0.11. Tracking again at the learned density and smoothing gave a
+lower smoothed orientation RMSE on every one of 19 rendered recordings tried, and a lower
+smoothed range-of-motion error on average (docs/BENCHMARKS.md); the filtered poses of that run
+lag, so ``track`` without --smooth and the live view keep the default.
+
+The estimate: with the angular rate a random walk of density q, the rate's increment over dt
+has variance q dt on each axis, so q = sum |dw|^2 / (3 sum dt) over consecutive frames that
+both have an estimate. The smoothed rates carry little noise, which would bias it upwards;
+they also miss some of the true rate's fast detail, which biases it down: on the rendered
+recordings it came out 1.1-1.7 times the density of the true rates.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from wristtrack.tracking.config import TrackerConfig
+    from wristtrack.tracking.results import FrameResult
+
+# Fewer rate increments than this (about a second at 30 frames/s) say too little of the motion.
+MIN_INCREMENTS = 30
+# The learned density is kept at least this fraction of the default: on rendered recordings a
+# tenth of what their motion shows (0.025 against 0.11-0.19) lost up to 3 % of the frames.
+FLOOR_FRACTION = 0.02
+# A learned density above this fraction of the default is not worth a second pass.
+REFIT_BELOW = 0.8
+
+
+def rate_noise_density(w: np.ndarray, t: np.ndarray, ok: np.ndarray) -> float | None:
+    """The random-walk density (rad/s^2)^2 s of the angular rates ``w`` (N, 3) rad/s at times
+    ``t`` (N,) s, from the increments between consecutive frames both ``ok`` (N,) with a
+    positive interval; None with fewer than MIN_INCREMENTS of them."""
+    w, t, ok = np.asarray(w, float), np.asarray(t, float), np.asarray(ok, bool)
+    ok = ok & np.isfinite(w).all(axis=1) & np.isfinite(t)
+    dt = np.diff(t)
+    pair = ok[:-1] & ok[1:] & (dt > 0)
+    if pair.sum() < MIN_INCREMENTS:
+        return None
+    dw = np.diff(w, axis=0)[pair]
+    return float(np.sum(dw**2) / (3.0 * np.sum(dt[pair])))
+
+
+def smoothing_angular_accel(w: np.ndarray, t: np.ndarray, ok: np.ndarray,
+                            default: float) -> float | None:
+    """The angular acceleration density to track again at before smoothing (rates as for
+    :func:`rate_noise_density`), kept within [FLOOR_FRACTION, 1] times ``default``; None where
+    the rates say too little or a second pass would change little (above REFIT_BELOW times
+    ``default``)."""
+    q = rate_noise_density(w, t, ok)
+    if q is None or q > REFIT_BELOW * default:
+        return None
+    return max(q, FLOOR_FRACTION * default)
+
+
+def refits(config: TrackerConfig) -> bool:
+    """Whether a smoothed run of ``config`` is tracked again at the learned density: asked for
+    (TrackerConfig.smoothing_noise), with a model that has rates in its state (the paper's has
+    none to learn from)."""
+    return config.smoothing_noise == "learned" and config.model == "default"
+
+
+def results_angular_accel(results: list[FrameResult], default: float) -> float | None:
+    """:func:`smoothing_angular_accel` from a smoothed run's results."""
+    if not results:
+        return None
+    w = np.stack([np.asarray(r.w, float) for r in results])
+    t = np.array([r.timestamp for r in results])
+    ok = np.array([r.has_estimate for r in results])
+    return smoothing_angular_accel(w, t, ok, default)
+
+
+def keeps_refit(first_tracked: int, refit_tracked: int) -> bool:
+    """Whether the run tracked again at the learned density replaces the first: only if it has
+    an estimate in as many frames (a calmer model must not lose a fast turn the first
+    followed)."""
+    return refit_tracked >= first_tracked
