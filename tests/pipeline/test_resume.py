@@ -14,9 +14,11 @@ import numpy as np
 import pytest
 
 from wristtrack.cli import main
+from wristtrack.errors import InputError
 from wristtrack.io.open import open_recording
 from wristtrack.io.poses import read_poses
-from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE
+from wristtrack.io.run_folder import REFIT_DIR
+from wristtrack.pipeline.checkpoint import CHECKPOINT_FILE, completed_summary, resumable
 from wristtrack.pipeline.track import track_recording
 from wristtrack.tracking.noise_scale import primes
 from wristtrack.tracking.tracker import TrackerConfig
@@ -115,6 +117,32 @@ def test_interrupted_smoothed_run_resumes_to_the_same_smoothed_result(rec, tmp_p
     for name in ("poses.csv", "poses_filtered.csv", "filter_states.f64"):
         if (full / name).exists():
             assert (part / name).read_bytes() == (full / name).read_bytes(), name
+
+
+def test_run_interrupted_in_its_refit_keeps_the_first_and_resumes_to_the_same_result(
+        rec, tmp_path, interrupt_at):
+    """A Ctrl-C while --smooth tracks the recording again at the learned noise
+    (pipeline/refit.py): the finished first run stays whole in the run folder, and --resume
+    completes the refit to the result of a run never interrupted."""
+    full, part = tmp_path / "full", tmp_path / "part"
+    with open_recording(rec) as recording:
+        track_recording(recording, full, progress=False, smooth=True)
+    assert _summary(full)["smoothing_process_noise"]["refit_kept"] is True
+    _run_interrupted(interrupt_at, rec, part, 30, nth=2, smooth=True)  # the second reading
+    first = _summary(part)
+    assert first["interrupted"] is False and "smoothing_process_noise" not in first
+    assert (part / "poses_filtered.csv").is_file()
+    assert (part / REFIT_DIR / CHECKPOINT_FILE).is_file()
+    assert _summary(part / REFIT_DIR)["interrupted"] is True
+    # not complete (batch runs it again), and resumed only as it was started
+    assert completed_summary(part) is None and resumable(part)
+    with pytest.raises(InputError, match="learned noise; resume it with the options"):
+        _resume(rec, part, smooth=True, config=TrackerConfig(smoothing_noise="model"))
+    _resume(rec, part, smooth=True)
+    assert not (part / REFIT_DIR).exists()
+    for name in ("poses.csv", "poses_filtered.csv"):
+        assert (part / name).read_bytes() == (full / name).read_bytes(), name
+    assert _summary(part) == _summary(full)
 
 
 @pytest.fixture(scope="module")

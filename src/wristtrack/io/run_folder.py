@@ -18,6 +18,8 @@ from wristtrack.io.poses import read_poses
 # Without hand.json, the layout `track` surveyed over the recording (tracking/layout_survey.py),
 # in hand.json's format, for the subject's other recordings
 SURVEYED_HAND = "hand_surveyed.json"
+# track --smooth's refit pass, under way (pipeline/refit.py): the run is not complete yet
+REFIT_DIR = "refit.partial"
 
 
 def run_file(run_dir: str | Path, name: str) -> Path:
@@ -36,7 +38,13 @@ def run_file(run_dir: str | Path, name: str) -> Path:
 
 def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """poses.csv columns and summary.json of a run folder; InputError with one line if unusable."""
-    poses, summary_path = run_file(run_dir, "poses.csv"), run_file(run_dir, "summary.json")
+    poses = run_file(run_dir, "poses.csv")
+    return read_poses(poses), read_summary(run_dir)
+
+
+def read_summary(run_dir: str | Path) -> dict[str, Any]:
+    """summary.json of a run folder; InputError with one line if unusable."""
+    summary_path = run_file(run_dir, "summary.json")
     try:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -45,4 +53,4 @@ def read_run(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]
         raise InputError(
             f"{summary_path} is not a wristtrack summary (no range_of_motion); re-run the tracking"
         )
-    return read_poses(poses), summary
+    return summary

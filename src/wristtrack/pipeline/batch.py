@@ -32,10 +32,10 @@ from typing import Any
 from wristtrack.errors import ConfigError, InputError, WristtrackError
 from wristtrack.io.video import VIDEO_SUFFIXES
 from wristtrack.pipeline.checkpoint import (
-    CHECKPOINT_FILE,
     CHECKPOINT_FRAMES,
     CheckpointMismatch,
     completed_summary,
+    resumable,
 )
 from wristtrack.report.study import (
     one_line,
@@ -147,7 +147,7 @@ def track_one(
             )
         camera = Camera.load(job.camera) if job.camera else None
         hand = HandLayout.load(job.hand) if job.hand else None
-        resume = not force and (Path(out) / CHECKPOINT_FILE).is_file()
+        resume = not force and resumable(out)
         with open_recording(job.source, camera=camera, hand=hand) as recording:
             kw = {"progress": False, "checkpoint_every": checkpoint_every, "smooth": smooth,
                   "survey": survey}

@@ -32,6 +32,7 @@ import numpy as np
 from wristtrack import __version__
 from wristtrack.errors import InputError, WristtrackError
 from wristtrack.io.atomic import write_bytes_atomic
+from wristtrack.io.run_folder import REFIT_DIR
 
 CHECKPOINT_FILE = ".checkpoint.pkl"
 CHECKPOINT_FRAMES = 300  # default: a checkpoint at least every this many frames ...
@@ -236,10 +237,18 @@ class Checkpointer:
 # --------------------------------------------------------------------------------- resuming
 
 
-def completed_summary(out: str | Path) -> dict[str, Any] | None:
-    """summary.json of a finished run in ``out`` (not interrupted, no checkpoint), else None."""
+def resumable(out: str | Path) -> bool:
+    """Whether ``out`` holds an interrupted run: a checkpoint, or --smooth's refit under way
+    (pipeline/refit.py)."""
     out = Path(out)
-    if (out / CHECKPOINT_FILE).exists():
+    return (out / CHECKPOINT_FILE).is_file() or (out / REFIT_DIR).is_dir()
+
+
+def completed_summary(out: str | Path) -> dict[str, Any] | None:
+    """summary.json of a finished run in ``out`` (not interrupted, no checkpoint, no refit
+    under way), else None."""
+    out = Path(out)
+    if (out / CHECKPOINT_FILE).exists() or (out / REFIT_DIR).is_dir():
         return None
     try:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))

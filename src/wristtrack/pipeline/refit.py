@@ -22,12 +22,12 @@ import numpy as np
 
 from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.poses import read_pose_table
+from wristtrack.io.run_folder import REFIT_DIR, read_summary
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.pipeline.smoothing import FILTERED_POSES
 from wristtrack.tracking.smoother_noise import keeps_refit, smoothing_angular_accel
 from wristtrack.tracking.tracker import TrackerConfig
 
-REFIT_DIR = "refit.partial"
 _REPLACED = (FILTERED_POSES, "poses.csv", "summary.json")  # summary.json last: it says "done"
 _ESTIMATE = ("tracking", "coasting")
 
@@ -61,13 +61,10 @@ def learned_angular_accel(poses: Path, default: float) -> float | None:
 
 
 def refit_run(out: Path, config: TrackerConfig, first: dict[str, Any] | None,
-              run_pass: RunPass, resume: bool) -> dict[str, Any] | None:
+              run_pass: RunPass, resume: bool) -> dict[str, Any]:
     """The refit of the finished smoothed run in ``out`` (its summary ``first``; None: read it
-    from ``out``); the run's final summary, or None if the first run had nothing to learn from.
-    ``resume`` continues an interrupted refit."""
-    first = first if first is not None else ckpt.completed_summary(out)
-    if first is None:
-        return None
+    from ``out``); the run's final summary. ``resume`` continues an interrupted refit."""
+    first = first if first is not None else read_summary(out)
     default = config.process.angular_accel
     folder = out / REFIT_DIR
     q = learned_angular_accel(out / "poses.csv", default)

@@ -108,13 +108,19 @@ def track_recording(
                 return one.run(recording, folder, None, again, surveyed=True)
         return one.run(recording, folder, None, again)
 
-    if refitting and resume and refit_begun(out):  # the refit's turn
-        return refit_run(out, config, None, run_pass, resume=True) or ckpt.completed_summary(out)
+    if resume and refit_begun(out):  # the refit's turn
+        if not refitting:
+            raise InputError(
+                f"the run in {out} stopped while --smooth tracked it again at the learned noise; "
+                "resume it with the options it was started with (--smooth, --smooth-noise "
+                "learned) or track again without --resume"
+            )
+        return refit_run(out, config, None, run_pass, resume=True)
     if not resume:
         clear_refit(out)
     data = _passes(recording, out, passes, overlay, resume, surveyed, surveying)
     if refitting:
-        return refit_run(out, config, data, run_pass, resume=False) or data
+        return refit_run(out, config, data, run_pass, resume=False)
     return data
 
 
