@@ -4,9 +4,11 @@ process noise the first smoothed run's rates show (tracking/smoother_noise.py).
 The pass runs in the subfolder REFIT_DIR of the run folder, so the first run stays whole
 beside it until the refit is complete: an interrupted refit leaves a finished smoothed run
 (and its own checkpoint: ``--resume`` completes the refit). A complete refit replaces the
-first run's poses.csv, poses_filtered.csv and summary.json if it has an estimate in as many
-frames (smoother_noise.keeps_refit); either way summary.json says what was learned and used
-(``smoothing_process_noise``).
+first run's poses.csv and summary.json if it has an estimate in as many frames
+(smoother_noise.keeps_refit); either way summary.json says what was learned and used
+(``smoothing_process_noise``). poses_filtered.csv and the overlay video stay the first run's:
+the filter at the model's noise, as ``track`` without --smooth and a live camera give it (at
+the learned noise the filter alone lags a fast turn; only smoothed is it better).
 """
 
 from __future__ import annotations
@@ -24,11 +26,10 @@ from wristtrack.io.atomic import write_json_atomic
 from wristtrack.io.poses import read_pose_table
 from wristtrack.io.run_folder import REFIT_DIR, read_summary
 from wristtrack.pipeline import checkpoint as ckpt
-from wristtrack.pipeline.smoothing import FILTERED_POSES
 from wristtrack.tracking.smoother_noise import keeps_refit, smoothing_angular_accel
 from wristtrack.tracking.tracker import TrackerConfig
 
-_REPLACED = (FILTERED_POSES, "poses.csv", "summary.json")  # summary.json last: it says "done"
+_REPLACED = ("poses.csv", "summary.json")  # summary.json last: it says the run is done
 _ESTIMATE = ("tracking", "coasting")
 
 # One pass of the run: (its config, the folder it writes, resume) -> its summary.
