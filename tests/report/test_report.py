@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import html
 import json
 import math
 import re
@@ -494,4 +495,24 @@ def test_report_shows_the_runs_warnings_and_its_detector(run, tmp_path):
     html_text = write_report(copy).read_text()
     assert f'<p class="note">{text}</p>' in html_text
     assert "detector paper" in html_text
+    assert "Smoothing" not in html_text  # a filtered run
+
+
+@pytest.mark.parametrize(("noise", "words"), [
+    ({"learned_angular_accel": 0.1234, "refit_kept": True},
+     "tracked again and smoothed at the angular process noise the recording's rates showed, "
+     "0.123 (rad/s²)² s (model 2.50"),
+    ({"learned_angular_accel": 0.1234, "refit_kept": False},
+     "at the model's angular process noise, 2.50 (rad/s²)² s: tracked again at the 0.123"),
+    ({"learned_angular_accel": None, "refit_kept": False},
+     "at the model's angular process noise, 2.50 (rad/s²)² s (the recording's rates said too"),
+])
+def test_report_says_what_the_smoothing_learned(run, tmp_path, noise, words):
+    out, _ = run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("report.html", "figures"))
+    summary = json.loads((copy / "summary.json").read_text())
+    summary["smoothing_process_noise"] = {"model_angular_accel": 2.5, **noise}
+    (copy / "summary.json").write_text(json.dumps(summary))
+    assert words in html.unescape(write_report(copy).read_text())
     assert "was not resolved" not in (out / "report.html").read_text()

@@ -165,6 +165,9 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
                                 f"{'yes' if settings.get('use_depth') else 'no'}, detector "
                                 f"{settings.get('detector', 'default')}"
                                 f"{', RTS-smoothed' if settings.get('smoothed') else ''}"))
+    smoothing = summary.get("smoothing_process_noise")
+    if smoothing:  # --smooth's process noise, learned from the recording (pipeline/refit.py)
+        rows.append(("Smoothing", _smoothing_noise(smoothing)))
     origin = settings.get("hand_layout_from")
     if origin:  # hand.json, the still start or surveyed (tracking/layout_survey.py)
         surveyed = summary.get("hand_layout_surveyed")
@@ -187,6 +190,21 @@ def _meta(summary: dict[str, Any], run: Path) -> str:
     rows += [(labels.get(k, k), v) for k, v in conventions.items()]
     items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in rows)
     return f'<dl class="meta">{items}</dl>'
+
+
+def _smoothing_noise(noise: dict[str, Any]) -> str:
+    """summary.json's smoothing_process_noise in words."""
+    model, learned = noise.get("model_angular_accel"), noise.get("learned_angular_accel")
+    unit = "(rad/s\u00b2)\u00b2 s"
+    if learned is None:
+        return (f"at the model's angular process noise, {_fmt(model, 2)} {unit} (the recording's "
+                "rates said too little to learn it, or about as much)")
+    if not noise.get("refit_kept"):
+        return (f"at the model's angular process noise, {_fmt(model, 2)} {unit}: tracked again at "
+                f"the {_fmt(learned, 3)} its rates showed, the hand was lost in more frames")
+    return (f"tracked again and smoothed at the angular process noise the recording's rates "
+            f"showed, {_fmt(learned, 3)} {unit} (model {_fmt(model, 2)}, kept for the filtered "
+            "poses)")
 
 
 def _learned_noise(noise: dict[str, Any]) -> str:
