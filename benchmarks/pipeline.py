@@ -26,6 +26,7 @@ from wristtrack.tracking.tracker import TrackerConfig
 PIPELINE_CONFIGS = {
     "default": (TrackerConfig(), False),
     "default --smooth": (TrackerConfig(), True),
+    "default --smooth --smooth-noise learned": (TrackerConfig(smoothing_noise="learned"), True),
     "paper": (TrackerConfig.paper(), False),
 }
 
@@ -63,7 +64,7 @@ def rendered_accuracy_table(
                                 survey=not label.startswith("paper"))
             r = evaluate(run / "poses.csv", rec / "truth.csv")
             rom = max((abs(v["range_error_deg"]) for v in r["rom"].values()), default=np.nan)
-            if label.startswith("default"):
+            if label in ("default", "default --smooth"):  # the defaults' findings
                 suffix = "_smooth" if smooth else ""
                 for key, value in (("render_rot", r["orientation_rmse_deg"]),
                                    ("render_pos", r["position_rmse_mm"]), ("render_rom", rom)):

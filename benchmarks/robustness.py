@@ -21,7 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, Row, recorded_detections, score
+from benchmarks.accuracy import (
+    ACCURACY_ROWS,
+    DEFAULT,
+    LEARNED_SMOOTHED,
+    Row,
+    recorded_detections,
+    score,
+)
 from wristtrack.geometry import rotation_distance
 from wristtrack.hand import MARKER_NAMES
 from wristtrack.sim.realism import EFFECTS, PRESET_REAL
@@ -65,7 +72,8 @@ TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURA
 # The combined conditions also get the offline smoother's row: the target for the
 # smoothed range of motion (<= 0.7 deg).
 SMOOTHED = "default, smoothed (offline)"
-COMBINED_EXTRA = {SMOOTHED: "default + smoother (offline)"}
+COMBINED_EXTRA = {SMOOTHED: "default + smoother (offline)",
+                  "default, smoothed at the learned noise (offline)": LEARNED_SMOOTHED}
 
 
 def render_condition(cache: Path, condition: str, seed: int, n_frames: int | None) -> Path:

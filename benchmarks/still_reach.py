@@ -19,7 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.accuracy import ACCURACY_ROWS, DEFAULT, range_errors, recorded_detections, score
+from benchmarks.accuracy import (
+    ACCURACY_ROWS,
+    DEFAULT,
+    LEARNED_SMOOTHED,
+    range_errors,
+    recorded_detections,
+    score,
+)
 from benchmarks.error_budget import corrected
 from benchmarks.robustness import _truth_markers
 from wristtrack.sim.realism import PRESET_REAL
@@ -35,6 +42,7 @@ CONDITIONS: dict[str, list[str]] = {  # condition -> simulator effects
 TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURACY_ROWS
     "default": DEFAULT,
     "default, smoothed (offline)": "default + smoother (offline)",
+    "default, smoothed at the learned noise (offline)": LEARNED_SMOOTHED,
     "OpenCV per-frame PnP": "OpenCV per-frame (IPPE PnP)",
 }
 TURNING, STILL = 1, (0, 2)  # wrist_angles' axes: flexion turns, deviation and pronation do not

@@ -106,6 +106,13 @@ def round_trip(cache: Path, name: str, file: str, cluster: str, options: dict,
     if code != 0:
         return out
     out["evaluate"] = evaluate(run / "poses.csv", rec / "truth.csv")
+    # the same smoothed at the process noise the recording shows (pipeline/refit.py)
+    learned = cache / f"val_{slug}_learned"
+    if _quiet(main, ["track", str(rec), "--out", str(learned), "--smooth", "--smooth-noise",
+                     "learned", "--no-report", "--no-progress"]) == 0:
+        out["learned"] = {
+            "evaluate": evaluate(learned / "poses.csv", rec / "truth.csv"),
+            **json.loads((learned / "summary.json").read_text())["smoothing_process_noise"]}
     given = {"time_offset_s": out["planted"]["time_offset_s"]} if offset_given else {}
     for mode, kw in (("markers", {"markers": MAP}), ("cluster", {"cluster": cluster}),
                      ("lowpass", {"markers": MAP, "lowpass_hz": LOWPASS_HZ})):
@@ -154,6 +161,29 @@ def _warning_rows(trips: list[dict], modes: tuple[str, ...]) -> list[str]:
     only as bad as it is silent)."""
     return [f"- {t['name']}, {mode}: warnings: {'; '.join(t[mode].get('warnings') or ['none'])}"
             for t in trips for mode in modes if t.get(mode) and "error" not in t[mode]]
+
+
+def _learned_rows(trips: list[dict]) -> list[str]:
+    """The smoother at the model's noise against the smoother at the learned noise, both
+    against the rendered truth (``evaluate``)."""
+    rows = [
+        "| motion | angular noise learned, (rad/s^2)^2 s (model 2.5) | orientation RMSE, model "
+        "/ learned (deg) | worst range-of-motion error, model / learned (deg) |",
+        "|---|---|---|---|",
+    ]
+    for trip in trips:
+        model, learned = trip.get("evaluate"), (trip.get("learned") or {})
+        if model is None or "evaluate" not in learned:
+            rows.append(f"| {trip['name']} | n/a | | |")
+            continue
+        q = learned.get("learned_angular_accel")
+        used = "" if learned.get("refit_kept") or q is None else " (not kept)"
+        rom = [max((abs(a["range_error_deg"]) for a in e["rom"].values()), default=None)
+               for e in (model, learned["evaluate"])]
+        rows.append(
+            f"| {trip['name']} | {_f(q, 3)}{used} | {_f(model['orientation_rmse_deg'])} / "
+            f"{_f(learned['evaluate']['orientation_rmse_deg'])} | {_f(rom[0])} / {_f(rom[1])} |")
+    return rows
 
 
 def _agreement_rows(trips: list[dict]) -> list[str]:
@@ -337,6 +367,15 @@ def validation_section(cache: Path, quick: bool = False, findings: dict | None =
         "### Agreement as validation studies report it (our six markers in the reference)",
         "",
         *_agreement_rows(calm),
+        "",
+        "### The smoother at the recording's own process noise (`--smooth-noise learned`)",
+        "",
+        "Each take tracked again with `--smooth --smooth-noise learned` (pipeline/refit.py), "
+        "both smoothed runs against the rendered truth (`evaluate`). A learned noise of n/a: "
+        "the first run's rates showed about the model's or said too little, and it was not "
+        "tracked again.",
+        "",
+        *_learned_rows([*calm, static[1]]),
         "",
         "### Stress case: the wheelchair-racing glove at full speed",
         "",

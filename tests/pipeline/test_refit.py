@@ -1,5 +1,6 @@
-"""``track --smooth`` tracks the recording again at the angular process noise its smoothed rates
-show, and smooths that run (pipeline/refit.py): against the rendered truth, and its files."""
+"""``track --smooth --smooth-noise learned`` tracks the recording again at the angular process
+noise its smoothed rates show, and smooths that run (pipeline/refit.py): against the rendered
+truth, and its files."""
 
 import json
 import subprocess
@@ -18,6 +19,7 @@ from wristtrack.tracking.smoother_noise import FLOOR_FRACTION, rate_noise_densit
 from wristtrack.tracking.tracker import TrackerConfig
 
 MODEL_Q = TrackerConfig().process.angular_accel
+LEARNED = TrackerConfig(smoothing_noise="learned")
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +51,8 @@ def _rates(poses):
 
 def test_the_learned_noise_is_the_first_runs_rate_density_and_the_refit_is_closer_to_the_truth(
         runs, every_effect, check_run):
+    """On a slow, smooth rendered movement under every camera effect, the case the option is
+    for (tracking/smoother_noise.py)."""
     model, learned = runs["model"], runs["learned"]
     # the first smoothed run is the run at the model's noise (smoothing_noise does not change
     # the tracker): its smoothed rates give the density the refit tracked at
@@ -83,7 +87,7 @@ def test_a_refit_with_fewer_estimates_leaves_the_first_run(runs, every_effect, t
     monkeypatch.setattr(refit, "keeps_refit", lambda first, again: False)
     out = tmp_path / "run"
     with open_recording(every_effect) as recording:
-        summary = track_recording(recording, out, progress=False, smooth=True)
+        summary = track_recording(recording, out, LEARNED, progress=False, smooth=True)
     model = runs["model"]
     for name in ("poses.csv", "poses_filtered.csv"):
         assert (out / name).read_bytes() == (model / name).read_bytes(), name
@@ -98,7 +102,8 @@ def test_a_refit_with_fewer_estimates_leaves_the_first_run(runs, every_effect, t
 def test_a_run_with_too_few_rates_is_not_tracked_again(rendered, tmp_path):
     rec = rendered("reach", seed=0, n_frames=20)  # 19 increments: too few to learn from
     with open_recording(rec) as recording:
-        summary = track_recording(recording, tmp_path / "run", progress=False, smooth=True)
+        summary = track_recording(recording, tmp_path / "run", LEARNED, progress=False,
+                                  smooth=True)
     note = summary["smoothing_process_noise"]
     assert note["learned_angular_accel"] is None and note["refit_kept"] is False
     assert summary["settings"]["process"]["angular_accel"] == MODEL_Q

@@ -125,10 +125,12 @@ def test_run_interrupted_in_its_refit_keeps_the_first_and_resumes_to_the_same_re
     (pipeline/refit.py): the finished first run stays whole in the run folder, and --resume
     completes the refit to the result of a run never interrupted."""
     full, part = tmp_path / "full", tmp_path / "part"
+    learned = TrackerConfig(smoothing_noise="learned")
     with open_recording(rec) as recording:
-        track_recording(recording, full, progress=False, smooth=True)
+        track_recording(recording, full, learned, progress=False, smooth=True)
     assert _summary(full)["smoothing_process_noise"]["refit_kept"] is True
-    _run_interrupted(interrupt_at, rec, part, 30, nth=2, smooth=True)  # the second reading
+    _run_interrupted(interrupt_at, rec, part, 30, nth=2, smooth=True,  # its second reading
+                     config=learned)
     first = _summary(part)
     assert first["interrupted"] is False and "smoothing_process_noise" not in first
     assert (part / "poses_filtered.csv").is_file()
@@ -137,8 +139,8 @@ def test_run_interrupted_in_its_refit_keeps_the_first_and_resumes_to_the_same_re
     # not complete (batch runs it again), and resumed only as it was started
     assert completed_summary(part) is None and resumable(part)
     with pytest.raises(InputError, match="learned noise; resume it with the options"):
-        _resume(rec, part, smooth=True, config=TrackerConfig(smoothing_noise="model"))
-    _resume(rec, part, smooth=True)
+        _resume(rec, part, smooth=True)  # the model's noise: the default
+    _resume(rec, part, smooth=True, config=learned)
     assert not (part / REFIT_DIR).exists()
     for name in ("poses.csv", "poses_filtered.csv"):
         assert (part / name).read_bytes() == (full / name).read_bytes(), name

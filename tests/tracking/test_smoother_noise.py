@@ -66,9 +66,9 @@ def test_the_density_to_track_again_at_is_bounded():
 
 
 def test_which_runs_are_tracked_again_and_which_refit_is_kept():
-    assert refits(TrackerConfig())
-    assert not refits(TrackerConfig(smoothing_noise="model"))
-    assert not refits(TrackerConfig.paper())  # no rates in its state
+    assert refits(TrackerConfig(smoothing_noise="learned"))
+    assert not refits(TrackerConfig())  # the model's noise: the default
+    assert not refits(TrackerConfig.paper(smoothing_noise="learned"))  # no rates in its state
     with pytest.raises(ValueError, match="smoothing noise"):
         TrackerConfig(smoothing_noise="fitted")
     assert keeps_refit(120, 120) and keeps_refit(118, 120)

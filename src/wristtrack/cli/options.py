@@ -98,11 +98,11 @@ def add_tracker_options(parser: argparse.ArgumentParser) -> None:
              "--no-prime-noise learns from the first frame on offline too, as a live run "
              "does")
     parser.add_argument(
-        "--smooth-noise", choices=SMOOTHING_NOISE, default="learned",
-        help="with smoothing: track the recording once more at the angular process noise its "
-             "smoothed rates show and smooth that run (learned, the default: a steadier "
-             "smoothed orientation, one more pass), or smooth the run at the model's noise "
-             "(model)")
+        "--smooth-noise", choices=SMOOTHING_NOISE, default="model",
+        help="with smoothing: smooth the run at the model's process noise (model, the "
+             "default), or track the recording once more at the angular process noise its "
+             "smoothed rates show and smooth that run (learned: one more pass; better for slow, "
+             "smooth movements seen by a noisy camera, worse for fast ones; see the README)")
     parser.add_argument(
         "--coast-limit", nargs=2, type=non_negative_float, metavar=("DEG", "MM"),
         default=None,

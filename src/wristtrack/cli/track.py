@@ -253,8 +253,7 @@ def add_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     track.add_argument(
         "--smooth", action="store_true",
         help="offline unscented RTS smoothing of the whole run (filtered poses kept in "
-        "poses_filtered.csv), at the angular process noise the recording shows: one more pass "
-        "(see --smooth-noise)",
+        "poses_filtered.csv; see --smooth-noise)",
     )
     track.add_argument(
         "--no-survey", action="store_true",

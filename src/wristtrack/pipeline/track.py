@@ -69,9 +69,9 @@ def track_recording(
     automatic labelling cannot; a ``label.ManualLabels`` (labels.json) names those of its own
     frame, matched by pixel position (until then the automatic labelling may initialise).
     ``smooth`` replaces the filtered poses by the unscented RTS smoother's once the run is
-    complete (the filtered ones stay in poses_filtered.csv); with the default model, a recording
-    that can be read again is then tracked once more, and smoothed, at the angular process
-    noise its smoothed rates show (:mod:`wristtrack.pipeline.refit`).
+    complete (the filtered ones stay in poses_filtered.csv); with ``config.smoothing_noise``
+    "learned", a recording that can be read again is then tracked once more, and smoothed, at
+    the angular process noise its smoothed rates show (:mod:`wristtrack.pipeline.refit`).
     ``overlay`` (an overlay.OverlayWriter) receives every frame with its detections and
     estimate. ``detector`` names the marker detector's preset: "default" (ours) or "paper"
     (the paper's as published, :mod:`wristtrack.detect.paper`). Returns the summary.

@@ -47,10 +47,12 @@ class TrackerConfig:
     # out worse (10 rendered seeds: 0.95 -> 1.02 deg; tracking/offset_model.py).
     follow_offset: bool = False
     process: ProcessNoise = ProcessNoise()
-    # ``track --smooth``: "learned" tracks the recording once more at the angular process noise
-    # its smoothed rates show, then smooths that run (pipeline/refit.py,
-    # tracking/smoother_noise.py); "model": the run at ``process`` is smoothed as it is.
-    smoothing_noise: str = "learned"
+    # ``track --smooth``: "model" smooths the run at ``process`` as it is; "learned" tracks the
+    # recording once more at the angular process noise its smoothed rates show, then smooths
+    # that run (pipeline/refit.py, tracking/smoother_noise.py). Not the default: better on slow,
+    # smooth rendered movements under every camera effect, worse on real recorded motions,
+    # whose fast detail the first smoothed run's rates miss (docs/BENCHMARKS.md).
+    smoothing_noise: str = "model"
     association_params: assoc.AssociationParams = assoc.AssociationParams()
     ukf: ukf.UKFParams = ukf.UKFParams()
     min_markers: int = 3  # fewer associated markers than this counts towards being lost

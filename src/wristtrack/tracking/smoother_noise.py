@@ -1,19 +1,23 @@
-"""The smoother's angular process noise, learned from the recording (``track --smooth``).
+"""The smoother's angular process noise, learned from the recording (``track --smooth
+--smooth-noise learned``).
 
 The default model's angular acceleration density (ProcessNoise.angular_accel) is set for a
 filter that must follow any hand's fastest turn as it happens. Offline the whole recording is
-known, and its own motion is usually far calmer: on the rendered robustness recordings the
+known, and a slow, smooth movement is far calmer: on the rendered robustness recordings the
 rates of a first smoothed run put the density at 0.13-0.19 (rad/s^2)^2 s against the default's
 2.5, and the true rates at 0.11. Tracking again at the learned density and smoothing gave a
-lower smoothed orientation RMSE on every one of 19 rendered recordings tried, and a lower
-smoothed range-of-motion error on average (docs/BENCHMARKS.md); the filtered poses of that run
-lag, so ``track`` without --smooth and the live view keep the default.
+lower smoothed orientation RMSE on every one of 19 such recordings tried, and a lower smoothed
+range-of-motion error on average (docs/BENCHMARKS.md). Real recorded motions are another
+matter: a tennis toss's true rates show 1.5, a racing glove's at 0.3x speed 0.9-2.3, and the
+first smoothed run's rates fell short of the toss's (0.54: the fast detail is what the first
+smoothing took out), whose smoothed orientation RMSE rose 0.23 -> 0.30 deg. Hence an option,
+not the default; a likelihood search over the density would settle both (not built).
 
 The estimate: with the angular rate a random walk of density q, the rate's increment over dt
 has variance q dt on each axis, so q = sum |dw|^2 / (3 sum dt) over consecutive frames that
-both have an estimate. The smoothed rates carry little noise, which would bias it upwards;
-they also miss some of the true rate's fast detail, which biases it down: on the rendered
-recordings it came out 1.1-1.7 times the density of the true rates.
+both have an estimate. The smoothed rates carry a little noise, which biases it upwards (on
+the rendered recordings it came out 1.1-1.7 times the density of the true rates), and miss
+the true rates' fast detail, which biases it down (the tennis toss: 0.37 times).
 """
 
 from __future__ import annotations
