@@ -97,8 +97,8 @@ def track_recording(
                      detector_settings)
     surveyed = out / SURVEYED_HAND
     surveying = survey and recording.hand is None
-    # a smoothed run tracks once more at the motion noise it shows (pipeline/refit.py), where
-    # the recording can be read again
+    # with --smooth-noise learned, a smoothed run tracks once more at the motion noise it
+    # shows (pipeline/refit.py), where the recording can be read again
     refitting = smooth and refits(config) and ckpt.input_identity(recording) is not None
 
     def run_pass(pass_config: TrackerConfig, folder: Path, again: bool) -> dict[str, Any]:
