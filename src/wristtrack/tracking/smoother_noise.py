@@ -13,7 +13,8 @@ first smoothed run's rates fell short of the toss's (0.54: the fast detail is wh
 smoothing took out), whose smoothed orientation RMSE rose 0.23 -> 0.30 deg. Hence an option,
 not the default. The filter's innovation likelihood does not settle it either: over a grid of
 densities it peaks near the real motions' true ones (1.5), yet their smoother does best above
-10, a sign that the measurement noise is conservative (NIS per degree of freedom 0.14-0.36).
+10. Why is open; the innovation covariance is larger than the innovations show throughout (NIS
+per degree of freedom 0.14-0.36), from the measurement noise or from the predicted spread.
 
 The estimate: with the angular rate a random walk of density q, the rate's increment over dt
 has variance q dt on each axis, so q = sum |dw|^2 / (3 sum dt) over consecutive frames that
