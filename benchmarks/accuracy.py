@@ -52,12 +52,20 @@ def _default_tracker(camera: Camera, layout: HandLayout | None, detections: list
     without a layout, a first pass surveys it over the recording and a second tracks with it;
     the pass that tracks starts from the noise a pass over the first PRIMING_S learned
     (TrackerConfig.prime_noise). The last pass's tracker and results."""
+    return _default_run(camera, layout, detections, config)[:2]
+
+
+def _default_run(camera: Camera, layout: HandLayout | None, detections: list[Detections],
+                 config: TrackerConfig | None = None
+                 ) -> tuple[Tracker, list[FrameResult], HandLayout | None]:
+    """:func:`_default_tracker`'s last pass and the layout it tracked with: ``layout``, the
+    surveyed one, or None (nothing surveyed: the survey's pass, on the still start's)."""
     config = TrackerConfig() if config is None else config
     if layout is None:
         tracker, results, layout = _survey(camera, detections, config)
         if layout is None:  # nothing surveyed: the first pass is the run
-            return tracker, results
-    return _tracking_pass(camera, layout, detections, config)
+            return tracker, results, None
+    return (*_tracking_pass(camera, layout, detections, config), layout)
 
 
 def _survey(camera: Camera, detections: list[Detections], config: TrackerConfig):
@@ -101,17 +109,13 @@ def _smoothed(camera: Camera, layout: HandLayout | None, detections: list[Detect
     from wristtrack.tracking.smoother_noise import keeps_refit, refits, results_angular_accel
 
     config = TrackerConfig() if config is None else config
-    surveyed = None
-    if layout is None:
-        tracker, results, surveyed = _survey(camera, detections, config)
-    if layout is not None or surveyed is not None:
-        tracker, results = _tracking_pass(camera, layout or surveyed, detections, config)
+    tracker, results, used = _default_run(camera, layout, detections, config)
     first = smooth_results(tracker.model, results, config.ukf, config.coast_limit)
     q = results_angular_accel(first, config.process.angular_accel) if refits(config) else None
     if q is None:
         return first
     again = replace(config, process=replace(config.process, angular_accel=q))
-    tracker, results = _tracking_pass(camera, layout or surveyed, detections, again)
+    tracker, results = _tracking_pass(camera, used, detections, again)
     refit = smooth_results(tracker.model, results, again.ukf, again.coast_limit)
     tracked = [sum(r.has_estimate for r in run) for run in (first, refit)]
     return refit if keeps_refit(*tracked) else first

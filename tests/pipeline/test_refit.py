@@ -11,7 +11,7 @@ import pytest
 
 from wristtrack.analysis.evaluate import evaluate
 from wristtrack.io.open import open_recording
-from wristtrack.io.poses import read_pose_table
+from wristtrack.io.poses import read_poses
 from wristtrack.io.run_folder import REFIT_DIR
 from wristtrack.pipeline import refit
 from wristtrack.pipeline.track import track_recording
@@ -40,13 +40,9 @@ def _summary(folder):
 
 
 def _rates(poses):
-    header, rows = read_pose_table(poses)
-    col = {name: j for j, name in enumerate(header)}
-    rows = list(rows)
-    w = np.array([[float(r[col[c]]) for c in ("wx", "wy", "wz")] for r in rows])
-    t = np.array([float(r[col["timestamp"]]) for r in rows])
-    ok = np.array([r[col["status"]] in ("tracking", "coasting") for r in rows])
-    return w, t, ok
+    cols = read_poses(poses)
+    w = np.column_stack([cols["wx"], cols["wy"], cols["wz"]])
+    return w, cols["timestamp"], np.isin(cols["status"], ("tracking", "coasting"))
 
 
 def test_the_learned_noise_is_the_first_runs_rate_density_and_the_refit_is_closer_to_the_truth(

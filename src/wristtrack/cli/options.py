@@ -65,8 +65,7 @@ def non_negative_float(text: str) -> float:
 def add_tracker_options(parser: argparse.ArgumentParser) -> None:
     """--model, --association, --no-depth, --no-skin-depth, --[no-]follow-slide,
     --[no-]follow-offset, --fixed-noise, --[no-]prime-noise, --smooth-noise and --coast-limit,
-    read back by
-    :func:`tracker_config`."""
+    read back by :func:`tracker_config`."""
     parser.add_argument("--model", choices=sorted(MODELS), default="default")
     parser.add_argument("--association", choices=METHODS, default="gnn")
     parser.add_argument("--no-depth", action="store_true", help="do not use depth in updates")

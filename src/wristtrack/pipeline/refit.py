@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.io.atomic import write_json_atomic
-from wristtrack.io.poses import read_pose_table
+from wristtrack.io.poses import read_poses
 from wristtrack.io.run_folder import REFIT_DIR, read_summary
 from wristtrack.pipeline import checkpoint as ckpt
 from wristtrack.tracking.smoother_noise import keeps_refit, smoothing_angular_accel
@@ -48,17 +48,10 @@ def clear_refit(out: Path) -> None:
 def learned_angular_accel(poses: Path, default: float) -> float | None:
     """The density to track ``poses`` (a smoothed poses.csv) again at, from its rates; None:
     no second pass (smoother_noise.smoothing_angular_accel)."""
-    header, rows = read_pose_table(poses)
-    col = {name: j for j, name in enumerate(header)}
-    w_cols = [col["wx"], col["wy"], col["wz"]]
-    t, w, ok = [], [], []
-    for row in rows:
-        t.append(float(row[col["timestamp"]]))
-        w.append([float(row[j]) for j in w_cols])
-        ok.append(row[col["status"]] in _ESTIMATE)
-    if not t:
-        return None
-    return smoothing_angular_accel(np.array(w), np.array(t), np.array(ok), default)
+    cols = read_poses(poses, ("timestamp", "status", "wx", "wy", "wz"))
+    w = np.column_stack([cols["wx"], cols["wy"], cols["wz"]])
+    ok = np.isin(cols["status"], _ESTIMATE)
+    return smoothing_angular_accel(w, cols["timestamp"], ok, default)
 
 
 def refit_run(out: Path, config: TrackerConfig, first: dict[str, Any] | None,
