@@ -72,8 +72,8 @@ TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURA
 # The combined conditions also get the offline smoother's row: the target for the
 # smoothed range of motion (<= 0.7 deg).
 SMOOTHED = "default, smoothed (offline)"
-COMBINED_EXTRA = {SMOOTHED: "default + smoother (offline)",
-                  "default, smoothed at the learned noise (offline)": LEARNED_SMOOTHED}
+LEARNED = "default, smoothed at the learned noise (offline)"
+COMBINED_EXTRA = {SMOOTHED: "default + smoother (offline)", LEARNED: LEARNED_SMOOTHED}
 
 
 def render_condition(cache: Path, condition: str, seed: int, n_frames: int | None) -> Path:

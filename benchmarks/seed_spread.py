@@ -17,7 +17,7 @@ import numpy as np
 from scipy import stats
 
 from benchmarks.accuracy import AS_NOISE, AS_NOISE_SMOOTHED, DEFAULT
-from benchmarks.robustness import CONDITIONS, SMOOTHED, per_seed
+from benchmarks.robustness import CONDITIONS, LEARNED, SMOOTHED, per_seed
 
 SPREAD_SEEDS = 10
 COMBINED = tuple(c for c in CONDITIONS if c.startswith("all"))
@@ -41,19 +41,26 @@ AS_NOISE_FIGURES: tuple[tuple[str, str, str], ...] = (
     (AS_NOISE, "rom", "worst RoM error (deg)"),
     (AS_NOISE_SMOOTHED, "rom", "worst RoM error, smoothed (deg)"),
 )
+# The default's smoother beside the smoother at the process noise learned from the recording
+# (``track --smooth --smooth-noise learned``, tracking/smoother_noise.py): (metric, label).
+LEARNED_FIGURES: tuple[tuple[str, str], ...] = (
+    ("rot", "orientation RMSE, smoothed (deg)"),
+    ("rom", "worst RoM error, smoothed (deg)"),
+)
 
 
 def seed_spread(cache: Path, seeds: tuple[int, ...], n_frames: int | None = None,
                 conditions: tuple[str, ...] = COMBINED) -> dict[str, dict[str, np.ndarray]]:
-    """condition -> '<tracker row>/<metric>' -> each seed's figure (len(seeds),): FIGURES'
-    and AS_NOISE_FIGURES'."""
+    """condition -> '<tracker row>/<metric>' -> each seed's figure (len(seeds),): FIGURES',
+    AS_NOISE_FIGURES' and, for both smoothers, LEARNED_FIGURES'."""
     out: dict[str, dict[str, np.ndarray]] = {}
+    smoothed = tuple((row, metric) for row in (SMOOTHED, LEARNED) for metric, _ in LEARNED_FIGURES)
     trackers = {"default": DEFAULT, AS_NOISE: AS_NOISE, AS_NOISE_SMOOTHED: AS_NOISE_SMOOTHED}
     for condition in conditions:
         per = per_seed(cache, condition, seeds, n_frames, trackers)
         out[condition] = {
             f"{row}/{metric}": np.array([m[metric] for m in per[row]], dtype=float)
-            for row, metric, *_ in (*FIGURES, *AS_NOISE_FIGURES) if row in per
+            for row, metric, *_ in (*FIGURES, *AS_NOISE_FIGURES, *smoothed) if row in per
         }
     return out
 
@@ -125,7 +132,8 @@ def spread_section(spread: dict[str, dict[str, np.ndarray]], seeds: tuple[int, .
             + ("meets every target." if not missed else "misses " + ", ".join(missed) + ".")
             + _as_noise_line(figures)
         )
-    return summary, [*lines, "", *_as_noise_table(spread, len(seeds))]
+    return summary, [*lines, "", *_as_noise_table(spread, len(seeds)),
+                     *_learned_table(spread, len(seeds))]
 
 
 def _as_noise_line(figures: dict[str, np.ndarray]) -> str:
@@ -164,6 +172,33 @@ def _as_noise_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[st
         "",
         "| condition | figure | slide as shared noise | default (slide in the state) | "
         "seeds where the default is lower |",
+        "|---|---|---|---|---|",
+        *rows,
+        "",
+    ]
+
+
+def _learned_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[str]:
+    """The smoother at the learned process noise beside the default's (means over the seeds);
+    nothing where the rows were not run."""
+    rows = []
+    for condition, figures in spread.items():
+        for metric, label in LEARNED_FIGURES:
+            a, b = figures.get(f"{SMOOTHED}/{metric}"), figures.get(f"{LEARNED}/{metric}")
+            if a is None or b is None:
+                continue
+            rows.append(f"| {condition} | {label} | {_fmt(float(np.nanmean(a)), False)} | "
+                        f"{_fmt(float(np.nanmean(b)), False)} | {int(np.sum(b < a))} of {n} |")
+    if not rows:
+        return []
+    return [
+        "The same recordings smoothed at the angular process noise learned from the "
+        "recording's own smoothed rates (`wristtrack track --smooth --smooth-noise learned`, "
+        "tracking/smoother_noise.py; not the default, it is worse on fast real motion: "
+        "'Validation') beside the default smoother; means over the seeds:",
+        "",
+        "| condition | figure | smoothed (model noise) | smoothed (learned noise) | "
+        "seeds where the learned noise is lower |",
         "|---|---|---|---|---|",
         *rows,
         "",

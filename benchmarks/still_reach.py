@@ -28,7 +28,7 @@ from benchmarks.accuracy import (
     score,
 )
 from benchmarks.error_budget import corrected
-from benchmarks.robustness import _truth_markers
+from benchmarks.robustness import LEARNED, SMOOTHED, _truth_markers
 from wristtrack.sim.realism import PRESET_REAL
 from wristtrack.sim.render import render_recording
 
@@ -41,14 +41,14 @@ CONDITIONS: dict[str, list[str]] = {  # condition -> simulator effects
 }
 TRACKERS: dict[str, str] = {  # table label -> row of benchmarks.accuracy.ACCURACY_ROWS
     "default": DEFAULT,
-    "default, smoothed (offline)": "default + smoother (offline)",
-    "default, smoothed at the learned noise (offline)": LEARNED_SMOOTHED,
+    SMOOTHED: "default + smoother (offline)",
+    LEARNED: LEARNED_SMOOTHED,
     "OpenCV per-frame PnP": "OpenCV per-frame (IPPE PnP)",
 }
 TURNING, STILL = 1, (0, 2)  # wrist_angles' axes: flexion turns, deviation and pronation do not
 COMBINED = "all (preset real)"
 # the issue's range-of-motion targets for every effect combined (deg): tracker -> (name, target)
-TARGETS = {"default": ("filtered", 1.0), "default, smoothed (offline)": ("smoothed", 0.7)}
+TARGETS = {"default": ("filtered", 1.0), SMOOTHED: ("smoothed", 0.7)}
 # Under COMBINED: the targets' trackers on the blobs with one source of error taken away (of
 # error_budget.BUDGET_DATA), table label -> (data, row of ACCURACY_ROWS)
 CORRECTIONS = ("pixels exact", "depth exact", "pixels and depth exact")

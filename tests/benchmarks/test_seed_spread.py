@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from benchmarks.accuracy import DEFAULT
-from benchmarks.robustness import SMOOTHED, robustness
+from benchmarks.robustness import LEARNED, SMOOTHED, robustness
 from benchmarks.seed_spread import mean_interval, seed_spread, spread_section
 
 
@@ -58,3 +58,14 @@ def test_each_seed_is_the_recording_the_robustness_table_averages(tmp_path):
                              ("default/recall", "default", "recall")):
         assert figures[key].shape == (2,)
         assert figures[key].mean() == pytest.approx(table[row][metric], rel=1e-9)
+    assert figures[f"{LEARNED}/rom"].shape == (2,)
+
+
+def test_learned_noise_table_sets_the_two_smoothers_side_by_side():
+    model, learned = np.array([0.9, 0.5, 0.7]), np.array([0.6, 0.6, 0.4])
+    spread = {"all (preset real)": {f"{SMOOTHED}/rom": model, f"{LEARNED}/rom": learned}}
+    _, lines = spread_section(spread, (0, 1, 2))
+    row = next(ln for ln in lines if ln.startswith("| all (preset real) | worst RoM error, sm")
+               and ln.count("|") == 6)
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[2:] == ["0.70", "0.53", "2 of 3"]
