@@ -73,6 +73,9 @@ def test_truth_evaluates_to_zero_error_against_itself_and_run_matches_its_metric
     expected_rot = run.errors.orientation_rmse_deg
     assert result["orientation_rmse_deg"] == pytest.approx(expected_rot, rel=1e-4)
     assert abs(result["rom"]["flexion"]["range_error_deg"]) < 2.0
+    # net of the run's constant errors (what compare's registration takes up): no larger
+    assert 0 < result["position_rmse_net_of_constant_mm"] <= result["position_rmse_mm"]
+    assert 0 < result["orientation_rmse_net_of_constant_deg"] <= result["orientation_rmse_deg"]
 
 
 def test_summary_has_range_of_motion_and_is_plain_json(run_dir):

@@ -51,6 +51,27 @@ def pose_errors(
     )
 
 
+def rmse_net_of_constant_errors(
+    R_est: np.ndarray, t_est: np.ndarray, R_true: np.ndarray, t_true: np.ndarray
+) -> tuple[float, float]:
+    """(position mm, orientation deg) RMS errors of estimated poses against truth (as
+    :func:`pose_errors`) after taking out their constant parts, as a registration to another
+    system (``wristtrack compare``) takes them up and cannot report them: the mean
+    camera-frame rotation error (R_est = E R_true) and the mean position error; NaN without an
+    estimate."""
+    from scipy.spatial.transform import Rotation
+
+    valid = np.isfinite(t_est).all(axis=1) & np.isfinite(R_est).all(axis=(1, 2))
+    if not valid.any():
+        return float("nan"), float("nan")
+    err = Rotation.from_matrix(R_est[valid] @ np.swapaxes(R_true[valid], 1, 2))
+    rot = (err.mean().inv() * err).magnitude()
+    pos = t_est[valid] - t_true[valid]
+    pos = pos - pos.mean(axis=0)
+    return (float(np.sqrt(np.mean(np.sum(pos**2, axis=1))) * 1e3),
+            float(np.degrees(np.sqrt(np.mean(rot**2)))))
+
+
 def labelling_accuracy(estimated: list[np.ndarray], truth: list[np.ndarray]) -> dict[str, float]:
     """Share of true marker blobs given their right label, and of clutter blobs taken as markers."""
     est = np.concatenate(estimated) if estimated else np.zeros(0, int)

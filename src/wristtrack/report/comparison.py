@@ -155,6 +155,7 @@ ms</td><td>{coarse_note}</td></tr></table>
 <h2>Agreement</h2>
 <p>{r['frames_compared']} frames compared ({r['frames_registered']} used by the registration).
 Position RMSE {_f(r['pos_rmse_mm'])} mm, orientation RMSE {_f(r['rot_rmse_deg'])} deg.</p>
+{_noise_paragraph(r)}
 <table><tr><th class=l>angle</th><th>bias (deg)</th><th>95 % LoA (deg)</th><th>ICC(2,1)</th>
 <th>RoM ours</th><th>RoM ref.</th><th>RoM error</th></tr>{rows}</table>
 {_img(angles_figure(s), 'Wrist angles: ours (colour) over the reference (grey)')}
@@ -169,6 +170,20 @@ Position RMSE {_f(r['pos_rmse_mm'])} mm, orientation RMSE {_f(r['rot_rmse_deg'])
     return (f"<!DOCTYPE html><html lang=en><head><meta charset=utf-8>"
             f"<title>wristtrack comparison</title><style>{_CSS}</style></head>"
             f"<body>{body}</body></html>\n")
+
+
+def _noise_paragraph(r: dict) -> str:
+    """What of the RMSEs is the reference's own noise (empty without an estimate)."""
+    noise = r.get("reference_noise")
+    if not noise:
+        return ""
+    return (f"<p>The reference's own noise, read off its rigid fits: {_f(noise['marker_mm'], 3)}"
+            f" mm per marker coordinate, {_f(noise['position_mm'], 3)} mm and "
+            f"{_f(noise['rotation_deg'], 3)} deg where compared. Net of it (in quadrature): "
+            f"position {_f(r['pos_rmse_net_mm'])} mm, orientation {_f(r['rot_rmse_net_deg'])} "
+            "deg, our own error if the reference's markers moved only by its noise (skin "
+            "motion between them counts as noise, so on a real hand these are lower bounds)."
+            "</p>")
 
 
 def write_comparison_html(path: str | Path, comparison: Comparison) -> Path:

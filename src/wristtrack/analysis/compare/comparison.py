@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from wristtrack.analysis.compare.align import CoarseAlignment, coarse_offset, speed
-from wristtrack.analysis.compare.lowpass import lowpass_markers
+from wristtrack.analysis.compare.lowpass import butterworth, lowpass_markers
 from wristtrack.analysis.compare.reference import (
     Interpolator,
     ReferencePoses,
@@ -26,6 +26,7 @@ from wristtrack.analysis.compare.reference import (
     from_truth,
     parse_mapping,
 )
+from wristtrack.analysis.compare.reference_noise import net_of, reference_noise
 from wristtrack.analysis.compare.register import Registration, register
 from wristtrack.analysis.compare.stats import bland_altman, icc21, range_difference, rmse
 from wristtrack.analysis.kinematics import analyse
@@ -171,6 +172,13 @@ def compare(
     pos_err = (p_lab - (p_ref + R_ref @ reg.x_t)) * 1e3
     R_ref_hand = R_ref @ reg.X_R
     rot_err = np.degrees(rotation_distance(R_lab, R_ref_hand)) if ref.has_rotation else None
+    noise = None
+    if ref.model is not None:
+        sos = None if lowpass_hz is None else butterworth(lowpass_hz, ref.rate)
+        noise = reference_noise(ref.model, ref.fit_rms_mm, reg.x_t, tau[k], ref.times[0],
+                                ref.rate, sos)
+    pos_rmse = rmse(pos_err)
+    rot_rmse = rmse(rot_err) if rot_err is not None else None
 
     ours_deg = np.column_stack([cols[f"{a}_deg"][k] for a in AXES])
     ref_deg = np.full_like(ours_deg, np.nan)
@@ -202,8 +210,12 @@ def compare(
         "speed_correlation": _num(coarse.peak),
         "frames_compared": int(len(k)),
         "frames_registered": int(reg.used.sum()),
-        "pos_rmse_mm": rmse(pos_err),
-        "rot_rmse_deg": rmse(rot_err) if rot_err is not None else None,
+        "pos_rmse_mm": pos_rmse,
+        "rot_rmse_deg": rot_rmse,
+        # the reference's own noise where compared, and our error net of it (reference_noise.py)
+        "reference_noise": None if noise is None else noise.as_dict(),
+        "pos_rmse_net_mm": None if noise is None else net_of(pos_rmse, noise.position_mm),
+        "rot_rmse_net_deg": None if noise is None else net_of(rot_rmse, noise.rotation_deg),
         "rom_error_deg": {},
         "bland_altman": {},
         "icc": {},
@@ -264,6 +276,8 @@ def comparison_json(comparison: Comparison) -> str:
 # Two crystal clocks differ by well under 0.1 %; a fit further off has aligned the wrong
 # things (a lost track, a different take).
 RATIO_PLAUSIBLE = 1e-3
+# The reference's noise at this share of an RMSE or more: the figure says more about it than us.
+NOISE_MOST = 0.7
 
 
 def _warnings(result: dict[str, Any], frames_with_pose: int) -> list[str]:
@@ -278,6 +292,13 @@ def _warnings(result: dict[str, Any], frames_with_pose: int) -> list[str]:
     if result["frames_registered"] < 0.8 * result["frames_compared"]:
         out.append(f"the registration kept only {result['frames_registered']} of "
                    f"{result['frames_compared']} frames: many tracking outliers")
+    noise = result.get("reference_noise")
+    if noise and result["rot_rmse_deg"] and noise["rotation_deg"] >= NOISE_MOST * result[
+            "rot_rmse_deg"]:
+        out.append(f"the reference's own noise ({noise['rotation_deg']:.3f} deg of orientation "
+                   f"from {noise['marker_mm']:.3f} mm per marker coordinate) is most of the "
+                   "orientation RMSE: low-pass its markers (--lowpass) or use a more precise "
+                   "reference")
     if result["frames_compared"] < 0.5 * frames_with_pose:
         out.append(f"only {result['frames_compared']} of our {frames_with_pose} frames with a "
                    "pose fall inside the reference's recording")
@@ -312,6 +333,12 @@ def format_comparison(result: dict[str, Any]) -> str:
         f"position RMSE {f(result['pos_rmse_mm'])} mm, orientation RMSE "
         f"{f(result['rot_rmse_deg'])} deg",
     ]
+    noise = result.get("reference_noise")
+    if noise:
+        lines.append(
+            f"reference noise {f(noise['marker_mm'], 3)} mm per marker coordinate: "
+            f"{f(noise['position_mm'], 3)} mm, {f(noise['rotation_deg'], 3)} deg where compared; "
+            f"net of it {f(result['pos_rmse_net_mm'])} mm, {f(result['rot_rmse_net_deg'])} deg")
     for axis in AXES:
         ba = result["bland_altman"][axis]
         lines.append(

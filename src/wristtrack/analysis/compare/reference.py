@@ -43,6 +43,7 @@ class ReferencePoses:
     units: str = "m"
     labels: dict[str, str] | None = None  # our name (or cluster index) -> the file's label
     notes: tuple[str, ...] = ()
+    model: np.ndarray | None = None  # (K, 3) m: the body points fitted, where a fit made the poses
 
     @property
     def valid(self) -> np.ndarray:
@@ -137,14 +138,14 @@ def from_markers(data: MarkerData, mapping: dict[str, str], layout: np.ndarray) 
         p = xyz[:, names.index("WRIST")]
         R = np.full((len(p), 3, 3), np.nan)
         rms = np.zeros(len(p))
-        has_rotation = False
+        has_rotation, model = False, None
     else:
         raise InputError(
             "--markers maps fewer than three markers and not WRIST: map WRIST, or three or more"
         )
     return ReferencePoses(
         "markers", data.times, R, p, data.rate, data.source, has_rotation, rms * 1e3,
-        data.units, dict(mapping), data.notes,
+        data.units, dict(mapping), data.notes, model,
     )
 
 
@@ -157,7 +158,7 @@ def from_cluster(data: MarkerData, labels: list[str]) -> ReferencePoses:
     R, p, rms = rigid_fit(shape, xyz)
     return ReferencePoses(
         "cluster", data.times, R, p, data.rate, data.source, True, rms * 1e3, data.units,
-        {str(i): label for i, label in enumerate(labels)}, data.notes,
+        {str(i): label for i, label in enumerate(labels)}, data.notes, shape,
     )
 
 
