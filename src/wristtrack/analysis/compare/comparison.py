@@ -176,7 +176,7 @@ def compare(
     if ref.model is not None:
         sos = None if lowpass_hz is None else butterworth(lowpass_hz, ref.rate)
         noise = reference_noise(ref.model, ref.fit_rms_mm, reg.x_t, tau[k], ref.times[0],
-                                ref.rate, sos)
+                                ref.rate, sos, ref.fit_markers)
     pos_rmse = rmse(pos_err)
     rot_rmse = rmse(rot_err) if rot_err is not None else None
 

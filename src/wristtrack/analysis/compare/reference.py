@@ -44,6 +44,7 @@ class ReferencePoses:
     labels: dict[str, str] | None = None  # our name (or cluster index) -> the file's label
     notes: tuple[str, ...] = ()
     model: np.ndarray | None = None  # (K, 3) m: the body points fitted, where a fit made the poses
+    fit_markers: np.ndarray | None = None  # (N,) markers each frame's fit had, where fitted
 
     @property
     def valid(self) -> np.ndarray:
@@ -146,6 +147,7 @@ def from_markers(data: MarkerData, mapping: dict[str, str], layout: np.ndarray) 
     return ReferencePoses(
         "markers", data.times, R, p, data.rate, data.source, has_rotation, rms * 1e3,
         data.units, dict(mapping), data.notes, model,
+        None if model is None else np.isfinite(xyz).all(axis=2).sum(axis=1),
     )
 
 
@@ -159,6 +161,7 @@ def from_cluster(data: MarkerData, labels: list[str]) -> ReferencePoses:
     return ReferencePoses(
         "cluster", data.times, R, p, data.rate, data.source, True, rms * 1e3, data.units,
         {str(i): label for i, label in enumerate(labels)}, data.notes, shape,
+        np.isfinite(xyz).all(axis=2).sum(axis=1),
     )
 
 

@@ -55,15 +55,17 @@ class ReferenceNoise:
                 "position_mm": self.position_mm, "variance_factor": self.variance_factor}
 
 
-def marker_sigma(fit_rms: np.ndarray, n_markers: int) -> float:
-    """Each marker coordinate's noise sigma from rigid fits of ``n_markers`` (>= 3) markers whose
-    per-frame RMS residuals (root of the mean over the markers of the squared 3-D distance) are
-    ``fit_rms`` (NaN: no fit); NaN without a finite one."""
+def marker_sigma(fit_rms: np.ndarray, n_markers: np.ndarray | int) -> float:
+    """Each marker coordinate's noise sigma from per-frame rigid fits of ``n_markers`` markers
+    (each frame's, or one count for all) whose RMS residuals (root of the mean over the markers
+    of the squared 3-D distance) are ``fit_rms`` (NaN: no fit): their squares summed over the
+    markers, over the degrees of freedom 3K - 6 they leave; NaN without a fit of three or more."""
     rms = np.asarray(fit_rms, dtype=float)
-    rms = rms[np.isfinite(rms)]
-    if rms.size == 0 or n_markers < 3:
+    k = np.broadcast_to(np.asarray(n_markers, dtype=float), rms.shape)
+    ok = np.isfinite(rms) & (k >= 3)
+    if not ok.any():
         return float("nan")
-    return float(np.sqrt(np.mean(rms**2) * n_markers / (3 * n_markers - 6)))
+    return float(np.sqrt(np.sum(rms[ok] ** 2 * k[ok]) / np.sum(3 * k[ok] - 6)))
 
 
 def pose_noise(model: np.ndarray, sigma: float, point: np.ndarray) -> tuple[float, float]:
@@ -113,12 +115,13 @@ def variance_factor(times: np.ndarray, first: float, rate: float,
 
 def reference_noise(model: np.ndarray, fit_rms_mm: np.ndarray, point: np.ndarray,
                     times: np.ndarray, first: float, rate: float,
-                    lowpass_sos: np.ndarray | None = None) -> ReferenceNoise | None:
+                    lowpass_sos: np.ndarray | None = None,
+                    fit_markers: np.ndarray | None = None) -> ReferenceNoise | None:
     """The reference's noise where compared (``times``, its clock), from its rigid fits of the body
-    points ``model`` (K, 3; metres) with per-frame RMS residuals ``fit_rms_mm``, at the body
-    ``point`` whose position is compared; None without a rigid fit of three or more markers."""
-    k = len(model)
-    sigma_mm = marker_sigma(fit_rms_mm, k)
+    points ``model`` (K, 3; metres) with per-frame RMS residuals ``fit_rms_mm`` over
+    ``fit_markers`` markers each (None: all K), at the body ``point`` whose position is
+    compared; None without a rigid fit of three or more markers."""
+    sigma_mm = marker_sigma(fit_rms_mm, len(model) if fit_markers is None else fit_markers)
     if not np.isfinite(sigma_mm):
         return None
     factor = variance_factor(times, first, rate, lowpass_sos)
