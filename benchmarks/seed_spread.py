@@ -130,7 +130,7 @@ def spread_section(spread: dict[str, dict[str, np.ndarray]], seeds: tuple[int, .
         summary.append(
             f"- {condition}, over {len(seeds)} seeds: "
             + ("meets every target." if not missed else "misses " + ", ".join(missed) + ".")
-            + _as_noise_line(figures)
+            + _as_noise_line(figures) + _learned_line(figures)
         )
     return summary, [*lines, "", *_as_noise_table(spread, len(seeds)),
                      *_learned_table(spread, len(seeds))]
@@ -147,6 +147,15 @@ def _as_noise_line(figures: dict[str, np.ndarray]) -> str:
         return ""
     return (" From the skin slide as shared noise (`--no-follow-slide`) to the default: "
             f"{', '.join(parts)}.")
+
+
+def _learned_line(figures: dict[str, np.ndarray]) -> str:
+    """' Smoothed at the learned noise: ...' for a summary line (empty without the rows)."""
+    a, b = figures.get(f"{SMOOTHED}/rom"), figures.get(f"{LEARNED}/rom")
+    if a is None or b is None:
+        return ""
+    return (" Smoothed at the noise learned from the recording (`--smooth-noise learned`): "
+            f"worst RoM {np.nanmean(a):.2f} -> {np.nanmean(b):.2f}.")
 
 
 def _as_noise_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[str]:

@@ -69,3 +69,5 @@ def test_learned_noise_table_sets_the_two_smoothers_side_by_side():
                and ln.count("|") == 6)
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[2:] == ["0.70", "0.53", "2 of 3"]
+    summary, _ = spread_section(spread, (0, 1, 2))
+    assert summary[0].endswith("(`--smooth-noise learned`): worst RoM 0.70 -> 0.53.")
