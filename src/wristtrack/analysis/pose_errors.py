@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from wristtrack.geometry import rotation_distance
 
@@ -59,8 +60,6 @@ def rmse_net_of_constant_errors(
     system (``wristtrack compare``) takes them up and cannot report them: the mean
     camera-frame rotation error (R_est = E R_true) and the mean position error; NaN without an
     estimate."""
-    from scipy.spatial.transform import Rotation
-
     valid = np.isfinite(t_est).all(axis=1) & np.isfinite(R_est).all(axis=(1, 2))
     if not valid.any():
         return float("nan"), float("nan")

@@ -35,8 +35,8 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import sosfiltfilt
 
 # Samples each side of the query that the variance factor's spline and low-pass are worked out
-# over: far beyond the reach of a cubic spline's weights and of a zero-lag filter at any
-# cutoff a lab uses (their weights fall below 1e-6 of the peak within this).
+# over: beyond the reach of a cubic spline's weights (x0.27 a sample) and of a zero-lag
+# Butterworth at the cutoffs labs use (6 Hz and up at 100-200 Hz: a few tens of samples).
 _HALF_WINDOW = 128
 _PHASES = 65  # phases between two samples at which the factor is tabulated
 
