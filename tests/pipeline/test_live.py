@@ -190,10 +190,13 @@ def test_a_slow_tracker_drops_frames_and_never_queues_them(reach, cut_recording,
     assert live["dropped_frames"] == poses["frame"][dropped].astype(int).tolist()
     assert np.isnan(poses["qw"][dropped]).all() and np.isnan(poses["flexion_deg"][dropped]).all()
     # One slot, no queue: a frame waits at most for the frame being processed, so its latency
-    # is bounded by two processing times (a queue would make it grow frame after frame).
+    # is bounded by two processing times, and the threads' wake-ups on a busy machine (up to
+    # ~35 ms seen with a benchmark beside the suite). A queue would make it grow frame after
+    # frame, to the burst's n processing times (~900 ms here).
     proc = np.asarray(live["per_frame"]["processing_ms"])
     lat = np.asarray(live["per_frame"]["latency_ms"])
-    assert (lat[1:] <= 2 * proc.max() + 15).all()
+    assert (lat[1:] <= 2 * proc.max() + 50).all()
+    assert lat.max() < 0.25 * n * proc.min()
     assert summary["frames"]["tracked"] == live["frames"]["processed"]
     _agree(poses, reach, cut_recording, tmp_path, deg=0.5, mm=1.0)
 
