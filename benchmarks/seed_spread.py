@@ -161,54 +161,46 @@ def _learned_line(figures: dict[str, np.ndarray]) -> str:
 def _as_noise_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[str]:
     """The figures with the skin slide as shared noise beside the default's (means over the
     seeds); nothing where the rows were not run."""
-    rows = []
-    for condition, figures in spread.items():
-        for row, metric, label in AS_NOISE_FIGURES:
-            base = "default" if row == AS_NOISE else SMOOTHED
-            a, b = figures.get(f"{row}/{metric}"), figures.get(f"{base}/{metric}")
-            if a is None or b is None:
-                continue
-            rows.append(f"| {condition} | {label} | {_fmt(float(np.nanmean(a)), False)} | "
-                        f"{_fmt(float(np.nanmean(b)), False)} | "
-                        f"{int(np.sum(b < a))} of {n} |")
-    if not rows:
-        return []
-    return [
+    pairs = [(label, f"{row}/{metric}",
+              f"{'default' if row == AS_NOISE else SMOOTHED}/{metric}")
+             for row, metric, label in AS_NOISE_FIGURES]
+    return _side_by_side(
+        spread, n, pairs,
         "The same recordings with the MCP markers' skin slide taken as noise the markers share "
         "afresh each frame (`wristtrack track --no-follow-slide`) beside the default, which "
         "carries the slide along the hand in its state (tracking/slide_model.py); means over "
         "the seeds:",
-        "",
-        "| condition | figure | slide as shared noise | default (slide in the state) | "
-        "seeds where the default is lower |",
-        "|---|---|---|---|---|",
-        *rows,
-        "",
-    ]
+        "slide as shared noise | default (slide in the state) | seeds where the default is lower")
 
 
 def _learned_table(spread: dict[str, dict[str, np.ndarray]], n: int) -> list[str]:
     """The smoother at the learned process noise beside the default's (means over the seeds);
     nothing where the rows were not run."""
+    pairs = [(label, f"{SMOOTHED}/{metric}", f"{LEARNED}/{metric}")
+             for metric, label in LEARNED_FIGURES]
+    return _side_by_side(
+        spread, n, pairs,
+        "The same recordings smoothed at the angular process noise learned from the "
+        "recording's own smoothed rates (`wristtrack track --smooth --smooth-noise learned`, "
+        "tracking/smoother_noise.py; not the default, it is worse on fast real motion: "
+        "'Validation') beside the default smoother; means over the seeds:",
+        "smoothed (model noise) | smoothed (learned noise) | "
+        "seeds where the learned noise is lower")
+
+
+def _side_by_side(spread: dict[str, dict[str, np.ndarray]], n: int,
+                  pairs: list[tuple[str, str, str]], intro: str, columns: str) -> list[str]:
+    """A table of two figures' means over the ``n`` seeds side by side per condition, and on
+    how many seeds the second is lower: ``pairs`` (label, first key, second key), ``columns``
+    the headers of the last three columns; nothing where no pair was run."""
     rows = []
     for condition, figures in spread.items():
-        for metric, label in LEARNED_FIGURES:
-            a, b = figures.get(f"{SMOOTHED}/{metric}"), figures.get(f"{LEARNED}/{metric}")
+        for label, first, second in pairs:
+            a, b = figures.get(first), figures.get(second)
             if a is None or b is None:
                 continue
             rows.append(f"| {condition} | {label} | {_fmt(float(np.nanmean(a)), False)} | "
                         f"{_fmt(float(np.nanmean(b)), False)} | {int(np.sum(b < a))} of {n} |")
     if not rows:
         return []
-    return [
-        "The same recordings smoothed at the angular process noise learned from the "
-        "recording's own smoothed rates (`wristtrack track --smooth --smooth-noise learned`, "
-        "tracking/smoother_noise.py; not the default, it is worse on fast real motion: "
-        "'Validation') beside the default smoother; means over the seeds:",
-        "",
-        "| condition | figure | smoothed (model noise) | smoothed (learned noise) | "
-        "seeds where the learned noise is lower |",
-        "|---|---|---|---|---|",
-        *rows,
-        "",
-    ]
+    return [intro, "", f"| condition | figure | {columns} |", "|---|---|---|---|---|", *rows, ""]

@@ -28,7 +28,7 @@ bound of ours.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -51,8 +51,7 @@ class ReferenceNoise:
     variance_factor: float  # the share of the samples' noise variance left where compared
 
     def as_dict(self) -> dict[str, float]:
-        return {"marker_mm": self.marker_mm, "rotation_deg": self.rotation_deg,
-                "position_mm": self.position_mm, "variance_factor": self.variance_factor}
+        return asdict(self)
 
 
 def marker_sigma(fit_rms: np.ndarray, n_markers: np.ndarray | int) -> float:
